@@ -1,0 +1,88 @@
+"""3-DOF vessel dynamics of 000 §IV-A, eqs. (1)-(6), for any Drake scalar type.
+
+    η̇ = T(ψ) ν                                             (1)
+    ν̇ = M⁻¹ (τ + τ_env) − M⁻¹ (C(ν) ν + D (ν − ν_c))        (2) with drag on the relative velocity
+
+η = [x y ψ] (world ENU), ν = [u v r] (body: x forward, y left). M = diag(m11, m22, m33) (4),
+C(ν) exactly as eq. (5), D = diag(Xu, Yv, Nr) (6). The water current V_c (world frame, m/s) enters
+through the drag only: ν_c = [R(ψ)ᵀ V_c, 0] (Fossen 2011 §10.3 relative-velocity form, linear
+drag); the Coriolis term stays on ν as eq. (5) writes it. Eq. (5) keeps the same form in the
+paper's y-starboard frame and in ours (flipping v and r maps it onto itself).
+
+The functions take and return numpy arrays of float, AutoDiffXd or symbolic Expression, so the
+LeafSystem, Linearize, MathematicalProgram and the tests share this one model.
+"""
+
+import numpy as np
+
+from usvdrake.vessel import Hydrodynamics
+
+
+def rotation(psi):
+    """T(ψ) of eq. (1): body → world rotation about z (3×3, object-safe)."""
+    c, s = np.cos(psi), np.sin(psi)
+    z = 0.0 * c
+    return np.array([[c, -s, z], [s, c, z], [z, z, z + 1.0]])
+
+
+def coriolis(xi: Hydrodynamics, nu) -> np.ndarray:
+    """C(ν) of eq. (5): skew-symmetric Coriolis-centripetal matrix (rigid body + added mass)."""
+    u, v, _ = nu
+    z = 0.0 * u
+    return np.array(
+        [
+            [z, z, -xi.m22 * v],
+            [z, z, xi.m11 * u],
+            [xi.m22 * v, -xi.m11 * u, z],
+        ]
+    )
+
+
+def current_in_body(psi, current_world) -> np.ndarray:
+    """ν_c: the water velocity V_c = [Vx, Vy] (world) expressed in the body frame, zero yaw rate."""
+    c, s = np.cos(psi), np.sin(psi)
+    vx, vy = current_world[0], current_world[1]
+    return np.array([c * vx + s * vy, -s * vx + c * vy, 0.0 * vx])
+
+
+def vessel_derivatives(xi: Hydrodynamics, q, tau, tau_env, current_world) -> np.ndarray:
+    """q̇ = f(q, τ) of eq. (7) for q = [x y ψ u v r]: eqs. (1), (2) with (4)-(6)."""
+    q = np.asarray(q)
+    psi, nu = q[2], q[3:6]
+    c, s = np.cos(psi), np.sin(psi)
+    u, v, r = nu
+    eta_dot = [c * u - s * v, s * u + c * v, r]
+    nu_r = nu - current_in_body(psi, current_world)
+    drag = np.array([xi.Xu * nu_r[0], xi.Yv * nu_r[1], xi.Nr * nu_r[2]])
+    cor = coriolis(xi, nu) @ nu
+    m = (xi.m11, xi.m22, xi.m33)
+    nu_dot = [(tau[i] + tau_env[i] - cor[i] - drag[i]) / m[i] for i in range(3)]
+    return np.array(eta_dot + nu_dot)
+
+
+def trim_thrust(xi: Hydrodynamics, surge_speed: float) -> np.ndarray:
+    """τ that holds a straight run at ``surge_speed`` in still water: [Xu u, 0, 0] (eq. 2, ν̇ = 0)."""
+    return np.array([xi.Xu * surge_speed, 0.0, 0.0])
+
+
+def straight_run_jacobian(xi: Hydrodynamics, u0: float) -> np.ndarray:
+    """∂f/∂q at a straight run q = [·, ·, 0, u0, 0, 0] with its trim thrust, derived by hand.
+
+    Differentiating eqs. (1)-(6) at ψ = v = r = 0, u = u0:
+      ẋ = u cosψ − v sinψ  → ∂/∂u = 1
+      ẏ = u sinψ + v cosψ  → ∂/∂ψ = u0, ∂/∂v = 1
+      ψ̇ = r
+      m11 u̇ = m22 v r − Xu u            → −Xu/m11 on u (the v, r terms vanish at v = r = 0)
+      m22 v̇ = −m11 u r − Yv v           → −Yv/m22 on v, −m11 u0/m22 on r
+      m33 ṙ = −(m22 − m11) u v − Nr r    → −(m22 − m11) u0/m33 on v, −Nr/m33 on r
+    The eigenvalues are therefore 0, 0, 0 (x, y, ψ: no restoring force), −Xu/m11 (surge), and
+    the two eigenvalues of the 2×2 sway-yaw block.
+    """
+    a = np.zeros((6, 6))
+    a[0, 3] = 1.0
+    a[1, 2], a[1, 4] = u0, 1.0
+    a[2, 5] = 1.0
+    a[3, 3] = -xi.Xu / xi.m11
+    a[4, 4], a[4, 5] = -xi.Yv / xi.m22, -xi.m11 * u0 / xi.m22
+    a[5, 4], a[5, 5] = -(xi.m22 - xi.m11) * u0 / xi.m33, -xi.Nr / xi.m33
+    return a
