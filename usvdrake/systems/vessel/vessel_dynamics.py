@@ -61,7 +61,7 @@ def vessel_derivatives(xi: Hydrodynamics, q, tau, tau_env, current_world) -> np.
 
 
 def trim_thrust(xi: Hydrodynamics, surge_speed: float) -> np.ndarray:
-    """τ that holds a straight run at ``surge_speed`` in still water: [Xu u, 0, 0] (eq. 2, ν̇ = 0)."""
+    """τ holding a straight run at ``surge_speed`` in still water: [Xu u, 0, 0] (eq. 2, ν̇ = 0)."""
     return np.array([xi.Xu * surge_speed, 0.0, 0.0])
 
 

@@ -1,0 +1,44 @@
+"""Mission metrics from logged signals (flat keys with units in the name)."""
+
+import numpy as np
+
+from usvdrake.vessel import VesselParams
+from usvdrake.worlds.world import World, hull_clearance
+
+
+def path_length(xy: np.ndarray) -> float:
+    """Length [m] of a polyline given as (n × 2)."""
+    return float(np.sum(np.linalg.norm(np.diff(xy, axis=0), axis=1))) if len(xy) > 1 else 0.0
+
+
+def mission_metrics(
+    times: np.ndarray,
+    states: np.ndarray,
+    reference: np.ndarray,
+    thrust: np.ndarray,
+    vessel: VesselParams,
+    world: World,
+    waypoints: np.ndarray,
+) -> dict:
+    """Metrics of one run. ``states`` (n × 6), ``reference`` (n × 3: ψ_d, u_d, e), ``thrust``
+    (n × command size), all sampled at ``times``."""
+    xy = states[:, :2]
+    speed = np.hypot(states[:, 3], states[:, 4])
+    hull = vessel.hull
+    clearance = hull_clearance(world, states, hull.length, hull.beam, hull.height)
+    limits = []
+    for t in vessel.thrusters:
+        limits += [t.max_force, np.inf] if t.azimuth else [max(t.max_force, -t.min_force)]
+    saturated = np.any(np.abs(thrust) >= 0.99 * np.asarray(limits), axis=1)
+    goal = np.asarray(waypoints, float)[-1]
+    return {
+        "path_length_m": path_length(xy),
+        "mean_speed_mps": float(np.mean(speed)),
+        "max_speed_mps": float(np.max(speed)),
+        "cross_track_rmse_m": float(np.sqrt(np.mean(reference[:, 2] ** 2))),
+        "cross_track_max_m": float(np.max(np.abs(reference[:, 2]))),
+        "final_distance_to_goal_m": float(np.linalg.norm(xy[-1] - goal)),
+        "min_clearance_m": float(np.min(clearance)),
+        "collision_samples": int(np.sum(clearance < 0.0)),
+        "thrust_saturated_fraction": float(np.mean(saturated)),
+    }

@@ -1,0 +1,129 @@
+"""The ``usvdrake`` command: ``run`` a scenario, ``bench`` a benchmark."""
+
+import argparse
+import runpy
+import sys
+import time
+from pathlib import Path
+
+from usvdrake.typed_yaml import ConfigError
+
+BENCH_DIR = Path(__file__).resolve().parents[1] / "bench"
+
+
+def _summary(result, scenario) -> str:
+    m = result.metrics
+    lines = [
+        f"usvdrake run {scenario.name}: {scenario.description}".rstrip(": "),
+        f"  vessel {m['vessel']} in world {m['world']} "
+        f"(seed {m['seed']}, estimator {m['estimator']})",
+        f"  simulated {m['sim_time_s']:.1f} s in {m['wall_time_s']:.1f} s wall "
+        f"= {m['realtime_factor']:.1f}x real time",
+        f"  mission {'COMPLETE' if m['mission_complete'] else 'NOT complete'}: "
+        f"path {m['path_length_m']:.1f} m, "
+        f"final distance to goal {m['final_distance_to_goal_m']:.2f} m",
+        f"  cross-track RMSE {m['cross_track_rmse_m']:.2f} m (max {m['cross_track_max_m']:.2f} m), "
+        f"mean speed {m['mean_speed_mps']:.2f} m/s",
+        f"  min clearance to obstacles {m['min_clearance_m']:.2f} m, "
+        f"collision samples {m['collision_samples']}, "
+        f"thrust saturated {100 * m['thrust_saturated_fraction']:.0f} % of the time",
+    ]
+    for name, path in result.files.items():
+        lines.append(f"  {name:<10} {path}")
+    return "\n".join(lines)
+
+
+def cmd_run(args) -> int:
+    from usvdrake.mission import make_meshcat, run_mission
+    from usvdrake.scenario import load_scenario, with_overrides
+
+    scenario = with_overrides(load_scenario(args.scenario), duration=args.duration, seed=args.seed)
+    meshcat = None
+    if args.meshcat:
+        meshcat = make_meshcat(args.port)
+        print(
+            f"Meshcat (localhost only): {meshcat.web_url()}  — open it in a browser to watch live"
+        )
+    rate = args.realtime_rate if args.realtime_rate is not None else (1.0 if args.meshcat else 0.0)
+    result = run_mission(
+        scenario,
+        out_dir=args.out,
+        meshcat=meshcat,
+        record=not args.no_replay,
+        progress=not args.quiet,
+        realtime_rate=rate,
+    )
+    print(_summary(result, scenario))
+    if args.meshcat and sys.stdin.isatty():
+        print("Meshcat stays up for the replay; press Ctrl-C to quit.")
+        try:
+            while True:
+                time.sleep(1.0)
+        except KeyboardInterrupt:
+            pass
+    return 0
+
+
+def cmd_bench(args) -> int:
+    path = BENCH_DIR / f"{args.name}.py"
+    if not path.is_file():
+        names = sorted(p.stem for p in BENCH_DIR.glob("*.py")) if BENCH_DIR.is_dir() else []
+        raise ConfigError(
+            "bench", "name", "one of " + (", ".join(names) or "(no bench/ folder)"), repr(args.name)
+        )
+    sys.argv = [str(path), *args.args]
+    runpy.run_path(str(path), run_name="__main__")
+    return 0
+
+
+def make_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="usvdrake", description="Autonomous surface vessels as Drake diagrams."
+    )
+    sub = p.add_subparsers(dest="command", required=True)
+    r = sub.add_parser("run", help="simulate a scenario and write metrics, replay and report")
+    r.add_argument(
+        "scenario",
+        nargs="?",
+        default=None,
+        help="shipped scenario name or YAML path (default: canal_demo)",
+    )
+    r.add_argument(
+        "--duration", type=float, default=None, help="override the simulated duration [s]"
+    )
+    r.add_argument("--seed", type=int, default=None, help="override the scenario seed")
+    r.add_argument("--out", default="out/run", help="output folder (default: out/run)")
+    r.add_argument(
+        "--meshcat",
+        action="store_true",
+        help="serve Meshcat on localhost and pace the run in real time",
+    )
+    r.add_argument(
+        "--port", type=int, default=None, help="Meshcat port (default: first free from 7000)"
+    )
+    r.add_argument(
+        "--realtime-rate", type=float, default=None, help="0: as fast as possible; 1: real time"
+    )
+    r.add_argument(
+        "--no-replay", action="store_true", help="skip the Meshcat recording (replay.html)"
+    )
+    r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.set_defaults(func=cmd_run)
+    b = sub.add_parser("bench", help="run bench/NAME.py (prints one JSON object)")
+    b.add_argument("name")
+    b.add_argument("args", nargs=argparse.REMAINDER)
+    b.set_defaults(func=cmd_bench)
+    return p
+
+
+def main(argv=None) -> int:
+    args = make_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except ConfigError as e:
+        print(f"usvdrake: error: {e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,66 @@
+"""``build_vessel_diagram``: one vessel = station (sim | hardware) + autonomy, wired by name."""
+
+from pydrake.geometry import Meshcat
+from pydrake.systems.framework import Diagram, DiagramBuilder
+
+from usvdrake.diagrams.autonomy import make_autonomy
+from usvdrake.diagrams.station import make_sim_station
+from usvdrake.scenario import Scenario
+from usvdrake.vessel import load_vessel
+
+
+def build_vessel_diagram(
+    scenario: Scenario, meshcat: Meshcat | None = None, hardware=None
+) -> Diagram:
+    """The named vessel diagram of ``scenario``.
+
+    Exports the station's ports (``thrust_measured``, ``ground_truth_state``) and the autonomy's
+    (``thruster_command``, ``mission_complete``, ``reference``, ``tau_desired``, ``tau_achieved``,
+    ``state_estimate``) at the top level. With ``meshcat``, a ``VesselVisualizer`` draws the hull,
+    thrust arrows and trail, and the world is drawn once. ``hardware`` is reserved for the
+    hardware-I/O issue: the station is then built from serial/UDP systems with the same ports.
+    """
+    if hardware is not None:
+        raise NotImplementedError("the hardware station arrives with the hardware-I/O issue")
+    vessel = load_vessel(scenario.vessel)
+    builder = DiagramBuilder()
+    station = builder.AddNamedSystem("station", make_sim_station(scenario, vessel))
+    autonomy = builder.AddNamedSystem("autonomy", make_autonomy(scenario, vessel))
+    builder.Connect(
+        autonomy.GetOutputPort("thruster_command"), station.GetInputPort("thruster_command")
+    )
+    if scenario.estimator == "oracle":
+        builder.Connect(
+            station.GetOutputPort("ground_truth_state"), autonomy.GetInputPort("ground_truth_state")
+        )
+
+    for name in ("thrust_measured", "ground_truth_state"):
+        builder.ExportOutput(station.GetOutputPort(name), name)
+    for name in (
+        "thruster_command",
+        "mission_complete",
+        "reference",
+        "tau_desired",
+        "tau_achieved",
+        "state_estimate",
+    ):
+        builder.ExportOutput(autonomy.GetOutputPort(name), name)
+
+    if meshcat is not None:
+        from usvdrake.viz.meshcat_world import draw_world
+        from usvdrake.viz.vessel_visualizer import VesselVisualizer
+        from usvdrake.worlds import make_world
+
+        draw_world(meshcat, make_world(scenario.world, scenario.seed))
+        viz = builder.AddNamedSystem(
+            "vessel_visualizer",
+            VesselVisualizer(meshcat, vessel, scenario.visualization, scenario.mission.waypoints),
+        )
+        builder.Connect(station.GetOutputPort("ground_truth_state"), viz.GetInputPort("state"))
+        builder.Connect(
+            station.GetOutputPort("thrust_measured"), viz.GetInputPort("thrust_applied")
+        )
+
+    diagram = builder.Build()
+    diagram.set_name(f"{scenario.vessel}_vessel")
+    return diagram

@@ -1,0 +1,200 @@
+"""``run_mission``: simulate a scenario's vessel diagram, record it, and measure it."""
+
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from pydrake.geometry import Meshcat, MeshcatParams
+from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator, SimulatorStatus
+from pydrake.systems.framework import DiagramBuilder, EventStatus
+from pydrake.systems.primitives import LogVectorOutput
+
+from usvdrake.analysis.metrics import mission_metrics
+from usvdrake.diagrams.vessel_diagram import build_vessel_diagram
+from usvdrake.scenario import Scenario
+from usvdrake.vessel import load_vessel
+from usvdrake.worlds import make_world
+
+
+def make_meshcat(port: int | None = None) -> Meshcat:
+    """A Meshcat server bound to localhost only (never exposed on the network)."""
+    params = MeshcatParams()
+    params.host = "localhost"
+    if port is not None:
+        params.port = port
+    return Meshcat(params)
+
+
+@dataclass
+class MissionResult:
+    metrics: dict
+    times: np.ndarray  # [s] log sample times
+    states: np.ndarray  # (n × 6) ground truth [x y ψ u v r]
+    reference: np.ndarray  # (n × 3) [ψ_d, u_d, e]
+    thrust: np.ndarray  # (n × command size) applied thrust
+    files: dict = field(default_factory=dict)  # name → path of what was written
+
+
+def _write_tum(path: Path, times: np.ndarray, states: np.ndarray) -> None:
+    """TUM trajectory: t x y z qx qy qz qw (yaw-only quaternion)."""
+    half = states[:, 2] / 2
+    rows = np.column_stack(
+        [
+            times,
+            states[:, 0],
+            states[:, 1],
+            np.zeros_like(times),
+            np.zeros_like(times),
+            np.zeros_like(times),
+            np.sin(half),
+            np.cos(half),
+        ]
+    )
+    np.savetxt(path, rows, fmt="%.6f", header="t x y z qx qy qz qw")
+
+
+def run_mission(
+    scenario: Scenario,
+    out_dir: str | Path | None = None,
+    meshcat: Meshcat | None = None,
+    record: bool = True,
+    progress: bool = False,
+    realtime_rate: float = 0.0,
+) -> MissionResult:
+    """Simulate ``scenario`` until its mission completes or ``scenario.duration`` elapses.
+
+    ``meshcat``: draw into this Meshcat (live); if None and ``record`` is set, a private
+    localhost Meshcat is made just for the HTML replay. ``out_dir``: write ``metrics.json``,
+    ``replay.html``, ``report.html`` and ``ground_truth.tum`` there. ``realtime_rate``: 0 runs as
+    fast as possible, 1.0 paces the simulation to the wall clock (for watching live).
+    """
+    vessel = load_vessel(scenario.vessel)
+    world = make_world(scenario.world, scenario.seed)
+    if meshcat is None and record and out_dir is not None:
+        meshcat = make_meshcat()
+    builder = DiagramBuilder()
+    vessel_diagram = builder.AddNamedSystem(
+        "vessel", build_vessel_diagram(scenario, meshcat=meshcat)
+    )
+    period = 1.0 / scenario.visualization.rate_hz
+    loggers = {
+        name: LogVectorOutput(vessel_diagram.GetOutputPort(name), builder, period)
+        for name in ("ground_truth_state", "reference", "thrust_measured")
+    }
+    for name, logger in loggers.items():
+        logger.set_name(f"log_{name}")
+    diagram = builder.Build()
+    diagram.set_name("mission")
+
+    simulator = Simulator(diagram)
+    ResetIntegratorFromFlags(
+        simulator, scenario.simulation.integrator, scenario.simulation.max_step
+    )
+    simulator.get_mutable_integrator().set_target_accuracy(scenario.simulation.accuracy)
+    simulator.set_target_realtime_rate(realtime_rate)
+    context = simulator.get_mutable_context()
+    complete_port = vessel_diagram.GetOutputPort("mission_complete")
+    vessel_context = vessel_diagram.GetMyContextFromRoot(context)
+
+    def monitor(root_context):
+        if complete_port.Eval(vessel_diagram.GetMyContextFromRoot(root_context))[0] > 0:
+            return EventStatus.ReachedTermination(diagram, "mission complete")
+        return EventStatus.Succeeded()
+
+    simulator.set_monitor(monitor)
+    if meshcat is not None and record:
+        meshcat.StartRecording(
+            frames_per_second=scenario.visualization.rate_hz,
+            set_visualizations_while_recording=True,
+        )
+
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(
+            total=scenario.duration,
+            unit="sim s",
+            bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]",
+        )
+    wall0 = time.perf_counter()
+    simulator.Initialize()
+    step = max(0.5, scenario.duration / 200.0)
+    t = 0.0
+    complete = False
+    while t < scenario.duration - 1e-9:
+        target = min(t + step, scenario.duration)
+        status = simulator.AdvanceTo(target)
+        new_t = context.get_time()
+        if bar is not None:
+            bar.update(new_t - t)
+        t = new_t
+        if status.reason() == SimulatorStatus.ReturnReason.kReachedTerminationCondition:
+            complete = True
+            break
+    wall = time.perf_counter() - wall0
+    if bar is not None:
+        bar.close()
+
+    if meshcat is not None:
+        viz = vessel_diagram.GetSubsystemByName("vessel_visualizer")
+        viz.ForcedPublish(viz.GetMyContextFromRoot(context))
+        viz.finish(viz.GetMyContextFromRoot(context))
+
+    logs = {name: lg.FindLog(context) for name, lg in loggers.items()}
+    times = logs["ground_truth_state"].sample_times()
+    states = logs["ground_truth_state"].data().T
+    reference = logs["reference"].data().T
+    thrust = logs["thrust_measured"].data().T
+    metrics = {
+        "scenario": scenario.name,
+        "vessel": scenario.vessel,
+        "world": scenario.world,
+        "seed": scenario.seed,
+        "estimator": scenario.estimator,
+        "sim_time_s": float(t),
+        "wall_time_s": float(wall),
+        "realtime_factor": float(t / wall) if wall > 0 else float("inf"),
+        "mission_complete": bool(
+            complete or vessel_diagram.GetOutputPort("mission_complete").Eval(vessel_context)[0] > 0
+        ),
+    }
+    metrics.update(
+        mission_metrics(
+            times, states, reference, thrust, vessel, world, np.asarray(scenario.mission.waypoints)
+        )
+    )
+
+    result = MissionResult(metrics, times, states, reference, thrust)
+    if out_dir is not None:
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        if meshcat is not None and record:
+            meshcat.StopRecording()
+            meshcat.PublishRecording()
+            (out / "replay.html").write_text(meshcat.StaticHtml())
+            result.files["replay"] = out / "replay.html"
+        from usvdrake.viz.report import write_report
+
+        write_report(
+            out / "report.html",
+            f"usvdrake run {scenario.name}",
+            metrics,
+            times,
+            states,
+            reference,
+            thrust,
+            vessel,
+            world,
+            scenario.mission.waypoints,
+        )
+        _write_tum(out / "ground_truth.tum", times, states)
+        (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+        result.files.update(
+            metrics=out / "metrics.json",
+            report=out / "report.html",
+            trajectory=out / "ground_truth.tum",
+        )
+    return result

@@ -1,0 +1,226 @@
+"""Scenarios: typed YAML describing one mission (vessel, world, environment, mission, rates).
+
+``load_scenario("canal_demo")`` reads ``usvdrake/scenarios/canal_demo.yaml``; a path works too.
+A bad file stops with a one-line :class:`~usvdrake.typed_yaml.ConfigError` (file, key, expected,
+got). Directions are ENU angles counter-clockwise from east, pointing where the flow goes.
+"""
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from usvdrake.typed_yaml import ConfigError, load_typed
+from usvdrake.vessel import VESSEL_DIR, available_vessels
+
+SCENARIO_DIR = Path(__file__).parent / "scenarios"
+DEFAULT_SCENARIO = "canal_demo"
+ESTIMATORS = ("oracle",)  # more arrive with the SLAM / NMHE issues
+
+
+@dataclass
+class CurrentConfig:
+    speed: float = 0.0  # [m/s] mean water velocity
+    direction_deg: float = 0.0  # [deg] direction the water flows towards (ENU, from east)
+    variation_std: float = 0.0  # [m/s] std of the slow speed variation (Gauss-Markov)
+    variation_time_constant: float = 60.0  # [s] correlation time of that variation
+
+
+@dataclass
+class WindConfig:
+    mean_speed: float = 0.0  # [m/s] mean wind speed at deck height
+    direction_deg: float = 0.0  # [deg] direction the air moves towards (ENU, from east)
+    gust_std: float = 0.0  # [m/s] std of the gust speed (first-order Gauss-Markov)
+    gust_time_constant: float = 5.0  # [s] gust correlation time
+    air_density: float = 1.225  # [kg/m^3]
+    cx: float = 0.6  # [-] surge wind-force coefficient (Fossen 2011 §8.1, small craft)
+    cy: float = 0.8  # [-] sway wind-force coefficient
+    cn: float = 0.05  # [-] yaw wind-moment coefficient (≈0 for fore-aft symmetric hulls)
+
+
+@dataclass
+class WaveConfig:
+    significant_height: float = 0.0  # [m] Hs of a Pierson-Moskowitz sea
+    peak_period: float = 2.0  # [s] Tp
+    direction_deg: float = 0.0  # [deg] direction the waves travel towards (ENU, from east)
+    components: int = 16  # [-] number of regular wave components summed
+
+
+@dataclass
+class EnvironmentConfig:
+    current: CurrentConfig = field(default_factory=CurrentConfig)
+    wind: WindConfig = field(default_factory=WindConfig)
+    waves: WaveConfig = field(default_factory=WaveConfig)
+    update_period: float = 0.1  # [s] step of the random processes (gusts, current variation)
+
+
+@dataclass
+class MissionConfig:
+    waypoints: list[list[float]] = field(default_factory=list)  # [[x, y], ...] [m], world ENU
+    speed: float = 0.0  # [m/s] cruise speed; 0 takes the vessel's cruise_speed
+    acceptance_radius: float = 2.0  # [m] a waypoint counts as reached inside this circle
+    slowdown_radius: float = 6.0  # [m] speed ramps down to zero over this distance to the goal
+
+
+@dataclass
+class ControlConfig:
+    rate_hz: float = 10.0  # [Hz] guidance + controller rate, zero-order hold (000 §VI: 10 Hz)
+    lookahead: float = 4.0  # [m] line-of-sight look-ahead distance Δ (Fossen 2011 §10.3.2)
+    heading_natural_frequency: float = 0.8  # [rad/s] closed-loop heading bandwidth ω_ψ
+    heading_damping: float = 1.0  # [-] closed-loop heading damping ζ_ψ
+    surge_bandwidth: float = 0.5  # [1/s] surge speed loop bandwidth
+    sway_bandwidth: float = 0.5  # [1/s] sway damping loop bandwidth (holonomic vessels)
+
+
+@dataclass
+class VisualizationConfig:
+    rate_hz: float = 10.0  # [Hz] Meshcat update and replay frame rate
+    trail_chunk: float = 2.0  # [s] the trail is drawn in pieces of this length
+    arrow_length: float = 0.0  # [m] thrust arrow length at full force; 0: half the hull length
+
+
+@dataclass
+class SimulationConfig:
+    integrator: str = "runge_kutta3"  # Drake integrator scheme (error-controlled)
+    accuracy: float = 1e-4  # [-] integrator target accuracy
+    max_step: float = 0.1  # [s] largest integrator step
+
+
+@dataclass
+class Scenario:
+    name: str = ""  # short identifier (defaults to the file name)
+    description: str = ""  # one line for humans
+    vessel: str = "roboat2"  # a shipped vessel name or a YAML path
+    world: str = "canal_demo"  # a world name from usvdrake.worlds
+    duration: float = 60.0  # [s] simulated time; the run ends earlier when the mission completes
+    seed: int = 0  # seed of every random source (world, environment, later sensors)
+    initial_state: list[float] = field(default_factory=lambda: [0.0] * 6)  # [x y ψ u v r]
+    estimator: str = "oracle"  # "oracle": the autonomy reads ground truth (until SLAM lands)
+    environment: EnvironmentConfig = field(default_factory=EnvironmentConfig)
+    mission: MissionConfig = field(default_factory=MissionConfig)
+    control: ControlConfig = field(default_factory=ControlConfig)
+    visualization: VisualizationConfig = field(default_factory=VisualizationConfig)
+    simulation: SimulationConfig = field(default_factory=SimulationConfig)
+
+
+def available_scenarios() -> list[str]:
+    return sorted(p.stem for p in SCENARIO_DIR.glob("*.yaml"))
+
+
+def _positive(file, key, value):
+    if not value > 0:
+        raise ConfigError(file, key, "a positive number", repr(value))
+
+
+def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
+    """Check values the types cannot: ranges, names, sizes. Returns ``s`` unchanged."""
+    from usvdrake.worlds import available_worlds  # late: worlds import scenario types
+
+    vessel_path = Path(s.vessel)
+    if (
+        vessel_path.suffix not in (".yaml", ".yml")
+        and not (VESSEL_DIR / f"{s.vessel}.yaml").is_file()
+    ):
+        raise ConfigError(
+            file, "vessel", "one of " + ", ".join(available_vessels()), repr(s.vessel)
+        )
+    if s.world not in available_worlds():
+        raise ConfigError(file, "world", "one of " + ", ".join(available_worlds()), repr(s.world))
+    _positive(file, "duration", s.duration)
+    if len(s.initial_state) != 6:
+        raise ConfigError(
+            file, "initial_state", "6 numbers [x y psi u v r]", f"{len(s.initial_state)} numbers"
+        )
+    if s.estimator not in ESTIMATORS:
+        raise ConfigError(file, "estimator", "one of " + ", ".join(ESTIMATORS), repr(s.estimator))
+    if not s.mission.waypoints:
+        raise ConfigError(file, "mission.waypoints", "at least one [x, y] waypoint", "none")
+    for i, wp in enumerate(s.mission.waypoints):
+        if len(wp) != 2:
+            raise ConfigError(file, f"mission.waypoints[{i}]", "[x, y]", f"{len(wp)} numbers")
+    if s.mission.speed < 0:
+        raise ConfigError(file, "mission.speed", "a number >= 0", repr(s.mission.speed))
+    for key, value in [
+        ("mission.acceptance_radius", s.mission.acceptance_radius),
+        ("mission.slowdown_radius", s.mission.slowdown_radius),
+        ("control.rate_hz", s.control.rate_hz),
+        ("control.lookahead", s.control.lookahead),
+        ("control.heading_natural_frequency", s.control.heading_natural_frequency),
+        ("control.heading_damping", s.control.heading_damping),
+        ("control.surge_bandwidth", s.control.surge_bandwidth),
+        ("control.sway_bandwidth", s.control.sway_bandwidth),
+        ("visualization.rate_hz", s.visualization.rate_hz),
+        ("visualization.trail_chunk", s.visualization.trail_chunk),
+        ("simulation.accuracy", s.simulation.accuracy),
+        ("simulation.max_step", s.simulation.max_step),
+        ("environment.update_period", s.environment.update_period),
+        ("environment.waves.peak_period", s.environment.waves.peak_period),
+        ("environment.wind.gust_time_constant", s.environment.wind.gust_time_constant),
+        (
+            "environment.current.variation_time_constant",
+            s.environment.current.variation_time_constant,
+        ),
+    ]:
+        _positive(file, key, value)
+    for key, value in [
+        ("environment.current.speed", s.environment.current.speed),
+        ("environment.current.variation_std", s.environment.current.variation_std),
+        ("environment.wind.mean_speed", s.environment.wind.mean_speed),
+        ("environment.wind.gust_std", s.environment.wind.gust_std),
+        ("environment.waves.significant_height", s.environment.waves.significant_height),
+        ("visualization.arrow_length", s.visualization.arrow_length),
+    ]:
+        if value < 0:
+            raise ConfigError(file, key, "a number >= 0", repr(value))
+    if s.environment.waves.components < 1:
+        raise ConfigError(
+            file,
+            "environment.waves.components",
+            "an integer >= 1",
+            repr(s.environment.waves.components),
+        )
+    integrators = (
+        "runge_kutta2",
+        "runge_kutta3",
+        "runge_kutta5",
+        "radau3",
+        "implicit_euler",
+        "bogacki_shampine3",
+    )
+    if s.simulation.integrator not in integrators:
+        raise ConfigError(
+            file,
+            "simulation.integrator",
+            "one of " + ", ".join(integrators),
+            repr(s.simulation.integrator),
+        )
+    return s
+
+
+def load_scenario(name_or_path: str | Path | None = None) -> Scenario:
+    """Load a shipped scenario by name, or a scenario YAML file; None gives the demo scenario."""
+    if name_or_path is None:
+        name_or_path = DEFAULT_SCENARIO
+    path = Path(name_or_path)
+    if path.suffix not in (".yaml", ".yml"):
+        path = SCENARIO_DIR / f"{name_or_path}.yaml"
+        if not path.is_file():
+            raise ConfigError(
+                "scenario",
+                "name",
+                "one of " + ", ".join(available_scenarios()),
+                repr(str(name_or_path)),
+            )
+    s = load_typed(Scenario, path)
+    if not s.name:
+        s = dataclasses.replace(s, name=path.stem)
+    return validate_scenario(s, path)
+
+
+def with_overrides(s: Scenario, duration: float | None = None, seed: int | None = None) -> Scenario:
+    """A validated copy of ``s`` with command-line overrides (``s`` itself is never modified)."""
+    changes = {}
+    if duration is not None:
+        changes["duration"] = duration
+    if seed is not None:
+        changes["seed"] = seed
+    return validate_scenario(dataclasses.replace(s, **changes), f"{s.name} (command line)")

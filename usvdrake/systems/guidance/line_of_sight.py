@@ -1,0 +1,79 @@
+"""Lookahead-based line-of-sight path following over a waypoint list (Fossen 2011 §10.3.2).
+
+For the active segment p_k → p_{k+1} with path angle α_k, the along-track and cross-track errors
+    s = (x − x_k) cos α_k + (y − y_k) sin α_k,    e = −(x − x_k) sin α_k + (y − y_k) cos α_k
+give the desired course ψ_d = α_k + atan(−e / Δ), Δ the lookahead distance [m]. The next segment
+is taken when the vessel is within the acceptance radius of p_{k+1} or has passed it along
+track. The speed reference ramps down linearly within ``slowdown_radius`` of the final waypoint.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def wrap_angle(a):
+    """Wrap to (−π, π]."""
+    return np.arctan2(np.sin(a), np.cos(a))
+
+
+@dataclass
+class LosReference:
+    heading: float  # ψ_d [rad]
+    speed: float  # u_d [m/s]
+    cross_track: float  # e [m]
+    distance_to_goal: float  # [m] straight-line distance to the final waypoint
+    index: int  # active segment's target waypoint (k + 1)
+    complete: bool  # the final waypoint has been reached
+
+
+def advance_index(
+    waypoints: np.ndarray, index: int, position: np.ndarray, acceptance_radius: float
+) -> int:
+    """Next target waypoint index after reaching / passing the current one(s)."""
+    n = len(waypoints)
+    while index < n - 1:
+        target = waypoints[index]
+        prev = waypoints[index - 1] if index > 0 else None
+        reached = np.linalg.norm(position - target) <= acceptance_radius
+        passed = False
+        if prev is not None:
+            seg = target - prev
+            length = np.linalg.norm(seg)
+            if length > 0:
+                passed = (position - prev) @ seg / length >= length
+        if reached or passed:
+            index += 1
+        else:
+            break
+    return index
+
+
+def los_reference(
+    waypoints: np.ndarray,
+    index: int,
+    position: np.ndarray,
+    start: np.ndarray,
+    cruise_speed: float,
+    lookahead: float,
+    acceptance_radius: float,
+    slowdown_radius: float,
+) -> LosReference:
+    """The LOS reference for target waypoint ``index``; ``start`` is where the path begins
+    (the vessel's initial position, used as p_{k} for the first segment)."""
+    target = waypoints[index]
+    prev = waypoints[index - 1] if index > 0 else start
+    seg = target - prev
+    if np.linalg.norm(seg) < 1e-9:
+        seg = target - position
+    alpha = np.arctan2(seg[1], seg[0])
+    rel = position - prev
+    e = -rel[0] * np.sin(alpha) + rel[1] * np.cos(alpha)
+    heading = wrap_angle(alpha + np.arctan2(-e, lookahead))
+    goal = waypoints[-1]
+    d_goal = float(np.linalg.norm(goal - position))
+    complete = index == len(waypoints) - 1 and d_goal <= acceptance_radius
+    speed = 0.0 if complete else cruise_speed * min(1.0, d_goal / slowdown_radius)
+    if index == len(waypoints) - 1 and d_goal < lookahead:
+        heading = float(np.arctan2(goal[1] - position[1], goal[0] - position[0]))
+    return LosReference(float(heading), float(speed), float(e), d_goal, index, bool(complete))

@@ -1,0 +1,164 @@
+"""Environmental disturbances as seeded random processes (numerical core of ``Environment``).
+
+* **Current** (Fossen 2011 §8.3): a world-frame velocity V_c = (U_c + δ) [cos β_c, sin β_c] whose
+  speed variation δ is a first-order Gauss-Markov process.
+* **Wind** (Fossen 2011 §8.1): mean speed plus a Gauss-Markov gust; the force on the hull above
+  the waterline follows the relative air velocity (u_rw, v_rw) = ν − R(ψ)ᵀ V_w:
+      X = −½ ρ_a c_x A_F u_rw V_rw,   Y = −½ ρ_a c_y A_L v_rw V_rw,   N = ½ ρ_a c_n A_L L u_rw v_rw
+  with A_F = B h_f, A_L = L h_f the frontal and lateral windage (h_f = height − draught). This is
+  Fossen's C_X = −c_x cos γ, C_Y = c_y sin γ, C_N = c_n sin 2γ written in velocity components;
+  N > 0 turns the bow into the wind.
+* **First-order wave forces**: a Pierson-Moskowitz sea (significant height H_s, peak period T_p)
+  as a sum of regular Airy components with seeded frequencies and phases, amplitude
+  a_i = √(2 S(ω_i) Δω). For a hull much shorter than the waves the wave-frequency force is the
+  Froude-Krylov + added-mass inertia force (Morison inertia term) M a_fluid, a_fluid the
+  horizontal particle acceleration at the surface; it is evaluated on two strips at ±L/4 so the
+  phase difference along the hull gives a yaw moment. The first-order forces average to zero:
+  the vessel oscillates with the waves (amplitude ≈ a_i) without drifting.
+
+Gauss-Markov steps are exact discretisations x_{k+1} = φ x_k + σ √(1 − φ²) w_k, φ = e^{−h/T},
+with w_k drawn from a generator seeded by (seed, stream, k): the same seed and step give the same
+number whatever else ran before, so a diagram can be re-simulated and reset freely.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from usvdrake.scenario import EnvironmentConfig
+from usvdrake.vessel import VesselParams
+
+GRAVITY = 9.81  # [m/s^2]
+STREAM_GUST, STREAM_CURRENT = 1, 2
+
+
+def gauss_markov_step(x: float, sigma: float, time_constant: float, h: float, w: float) -> float:
+    """One exact step of dx = −x/T dt + σ √(2/T) dW (stationary std σ) over h, white sample w."""
+    phi = np.exp(-h / time_constant)
+    return phi * x + sigma * np.sqrt(1.0 - phi * phi) * w
+
+
+def white_sample(seed: int, stream: int, k: int) -> float:
+    """The k-th standard-normal sample of a stream, independent of evaluation order."""
+    return float(np.random.default_rng([seed, stream, k]).standard_normal())
+
+
+def pierson_moskowitz(omega: np.ndarray, hs: float, tp: float) -> np.ndarray:
+    """PM spectrum S(ω) [m² s] for significant height hs [m] and peak period tp [s]
+    (DNV-RP-C205 §3.5.5 form: S = 5/16 H_s² ω_p⁴ ω⁻⁵ exp(−5/4 (ω_p/ω)⁴))."""
+    wp = 2.0 * np.pi / tp
+    return 5.0 / 16.0 * hs**2 * wp**4 * omega**-5 * np.exp(-1.25 * (wp / omega) ** 4)
+
+
+@dataclass
+class WaveComponents:
+    amplitude: np.ndarray  # [m]
+    omega: np.ndarray  # [rad/s]
+    wavenumber: np.ndarray  # [rad/m], deep water k = ω²/g
+    phase: np.ndarray  # [rad]
+    direction: float  # [rad] propagation direction (ENU)
+
+
+def make_waves(cfg, seed: int) -> WaveComponents:
+    """Random-phase, random-frequency components of the PM spectrum over [0.5, 3] ω_p."""
+    rng = np.random.default_rng([seed, 3])
+    n = cfg.components
+    wp = 2.0 * np.pi / cfg.peak_period
+    edges = np.linspace(0.5 * wp, 3.0 * wp, n + 1)
+    omega = edges[:-1] + rng.uniform(0.0, 1.0, n) * np.diff(edges)
+    amp = np.sqrt(
+        2.0 * pierson_moskowitz(omega, cfg.significant_height, cfg.peak_period) * np.diff(edges)
+    )
+    return WaveComponents(
+        amplitude=amp,
+        omega=omega,
+        wavenumber=omega**2 / GRAVITY,
+        phase=rng.uniform(0.0, 2.0 * np.pi, n),
+        direction=np.deg2rad(cfg.direction_deg),
+    )
+
+
+def wave_acceleration(waves: WaveComponents, xy: np.ndarray, t: float) -> np.ndarray:
+    """Horizontal fluid-particle acceleration [m/s²] at the surface at world point xy, time t."""
+    d = np.array([np.cos(waves.direction), np.sin(waves.direction)])
+    theta = waves.wavenumber * (d @ xy) - waves.omega * t + waves.phase
+    mag = np.sum(waves.amplitude * waves.omega**2 * np.sin(theta))
+    return mag * d
+
+
+class EnvironmentModel:
+    """Disturbance forces and current for one vessel; stateless apart from the Gauss-Markov
+    states passed in (gust speed, current speed variation)."""
+
+    def __init__(self, cfg: EnvironmentConfig, vessel: VesselParams, seed: int):
+        self.cfg, self.vessel, self.seed = cfg, vessel, seed
+        hull = vessel.hull
+        freeboard = max(hull.height - hull.draught, 0.0)
+        self.area_frontal = hull.beam * freeboard
+        self.area_lateral = hull.length * freeboard
+        self.waves = make_waves(cfg.waves, seed) if cfg.waves.significant_height > 0 else None
+
+    def step_processes(self, gust: float, current_var: float, k: int) -> tuple[float, float]:
+        """Advance (gust, current variation) by one update period, step index k."""
+        h = self.cfg.update_period
+        w, c = self.cfg.wind, self.cfg.current
+        gust = gauss_markov_step(
+            gust, w.gust_std, w.gust_time_constant, h, white_sample(self.seed, STREAM_GUST, k)
+        )
+        current_var = gauss_markov_step(
+            current_var,
+            c.variation_std,
+            c.variation_time_constant,
+            h,
+            white_sample(self.seed, STREAM_CURRENT, k),
+        )
+        return gust, current_var
+
+    def current(self, current_var: float) -> np.ndarray:
+        """Water velocity [m/s], world frame."""
+        c = self.cfg.current
+        if c.speed == 0.0 and c.variation_std == 0.0:
+            return np.zeros(2)
+        b = np.deg2rad(c.direction_deg)
+        return (c.speed + current_var) * np.array([np.cos(b), np.sin(b)])
+
+    def wind_force(self, q: np.ndarray, gust: float) -> np.ndarray:
+        """Wind force/moment [N, N, N m] in the body frame."""
+        w = self.cfg.wind
+        speed = w.mean_speed + gust
+        if w.mean_speed == 0.0 and w.gust_std == 0.0:
+            return np.zeros(3)
+        b = np.deg2rad(w.direction_deg)
+        psi = q[2]
+        c, s = np.cos(psi), np.sin(psi)
+        vw = speed * np.array([np.cos(b), np.sin(b)])
+        u_rw = q[3] - (c * vw[0] + s * vw[1])
+        v_rw = q[4] - (-s * vw[0] + c * vw[1])
+        v_rel = np.hypot(u_rw, v_rw)
+        k = 0.5 * w.air_density
+        return np.array(
+            [
+                -k * w.cx * self.area_frontal * u_rw * v_rel,
+                -k * w.cy * self.area_lateral * v_rw * v_rel,
+                k * w.cn * self.area_lateral * self.vessel.hull.length * u_rw * v_rw,
+            ]
+        )
+
+    def wave_force(self, q: np.ndarray, t: float) -> np.ndarray:
+        """First-order wave force/moment [N, N, N m] in the body frame (two-strip inertia model)."""
+        if self.waves is None:
+            return np.zeros(3)
+        h = self.vessel.hydrodynamics
+        psi = q[2]
+        c, s = np.cos(psi), np.sin(psi)
+        tau = np.zeros(3)
+        for x_strip in (0.25 * self.vessel.hull.length, -0.25 * self.vessel.hull.length):
+            p = q[:2] + x_strip * np.array([c, s])
+            a = wave_acceleration(self.waves, p, t)
+            ab = np.array([c * a[0] + s * a[1], -s * a[0] + c * a[1]])
+            f = 0.5 * np.array([h.m11 * ab[0], h.m22 * ab[1]])
+            tau += [f[0], f[1], x_strip * f[1]]
+        return tau
+
+    def tau_env(self, q: np.ndarray, t: float, gust: float) -> np.ndarray:
+        return self.wind_force(q, gust) + self.wave_force(q, t)

@@ -1,0 +1,101 @@
+"""``report.html``: the plots a person looks at after a run (trajectory, speed, heading, thrust)."""
+
+import base64
+import html
+import io
+import json
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.patches import Polygon  # noqa: E402
+
+from usvdrake.systems.vessel.thrusters import command_names  # noqa: E402
+from usvdrake.vessel import VesselParams  # noqa: E402
+from usvdrake.worlds.world import World  # noqa: E402
+
+KIND_COLORS = {
+    "quay": "#8c735f",
+    "wall": "#736659",
+    "building": "#a0522d",
+    "boat": "#9aa7b8",
+    "bridge": "#4d4d52",
+}
+
+
+def _box_corners(b):
+    c, s = np.cos(b.yaw), np.sin(b.yaw)
+    local = np.array([[1, 1], [-1, 1], [-1, -1], [1, -1]]) * [b.lx / 2, b.ly / 2]
+    return local @ np.array([[c, s], [-s, c]]) + [b.x, b.y]
+
+
+def _png(fig) -> str:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return base64.b64encode(buf.getvalue()).decode()
+
+
+def write_report(
+    path,
+    title,
+    metrics,
+    times,
+    states,
+    reference,
+    thrust,
+    vessel: VesselParams,
+    world: World,
+    waypoints,
+):
+    fig, ax = plt.subplots(figsize=(9, 6))
+    for w in world.water:
+        ax.add_patch(Polygon(_box_corners(w), color="#bcd7ef", zorder=0))
+    for b in world.boxes:
+        alpha = 0.35 if b.kind == "bridge" else 1.0
+        ax.add_patch(
+            Polygon(_box_corners(b), color=KIND_COLORS.get(b.kind, "#888"), alpha=alpha, zorder=1)
+        )
+    wp = np.asarray(waypoints, float)
+    ax.plot(wp[:, 0], wp[:, 1], "o--", color="#2ca02c", label="waypoints", zorder=2)
+    ax.plot(states[:, 0], states[:, 1], color="#d62728", lw=2, label="vessel", zorder=3)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x east [m]")
+    ax.set_ylabel("y north [m]")
+    ax.legend(loc="best")
+    ax.set_title("Trajectory")
+    traj = _png(fig)
+
+    fig, axs = plt.subplots(3, 1, figsize=(9, 8), sharex=True)
+    axs[0].plot(times, states[:, 3], label="u (surge)")
+    axs[0].plot(times, states[:, 4], label="v (sway)")
+    axs[0].plot(times, reference[:, 1], "--", label="u_d")
+    axs[0].set_ylabel("[m/s]")
+    axs[0].legend(loc="best")
+    axs[1].plot(times, np.unwrap(states[:, 2]), label="ψ")
+    axs[1].plot(times, np.unwrap(reference[:, 0]), "--", label="ψ_d")
+    axs[1].set_ylabel("[rad]")
+    axs[1].legend(loc="best")
+    names = command_names(vessel.thrusters)
+    for i, n in enumerate(names):
+        if n.endswith(".force"):
+            axs[2].plot(times, thrust[:, i], label=n[: -len(".force")])
+    axs[2].set_ylabel("thrust [N]")
+    axs[2].set_xlabel("time [s]")
+    axs[2].legend(loc="best", ncol=4)
+    signals = _png(fig)
+
+    rows = "".join(
+        f"<tr><td>{html.escape(k)}</td><td>{html.escape(json.dumps(v))}</td></tr>"
+        for k, v in metrics.items()
+    )
+    page = f"""<!doctype html><html><head><meta charset="utf-8"><title>{html.escape(title)}</title>
+<style>body{{font-family:sans-serif;margin:2em}} td{{padding:2px 12px}}
+tr:nth-child(odd){{background:#f3f3f3}}</style>
+</head><body><h1>{html.escape(title)}</h1><table>{rows}</table>
+<h2>Trajectory</h2><img src="data:image/png;base64,{traj}">
+<h2>Signals</h2><img src="data:image/png;base64,{signals}"></body></html>"""
+    with open(path, "w") as f:
+        f.write(page)
