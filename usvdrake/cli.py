@@ -24,8 +24,12 @@ def _summary(result, scenario) -> str:
         f"final distance to goal {m['final_distance_to_goal_m']:.2f} m",
         f"  cross-track RMSE {m['cross_track_rmse_m']:.2f} m (max {m['cross_track_max_m']:.2f} m), "
         f"mean speed {m['mean_speed_mps']:.2f} m/s",
-        f"  min clearance to obstacles {m['min_clearance_m']:.2f} m, "
-        f"collision samples {m['collision_samples']}, "
+        (
+            f"  min clearance to obstacles {m['min_clearance_m']:.2f} m, "
+            if m["min_clearance_m"] is not None
+            else "  no obstacles, "
+        )
+        + f"collision samples {m['collision_samples']}, "
         f"thrust saturated {100 * m['thrust_saturated_fraction']:.0f} % of the time",
     ]
     for name, path in result.files.items():

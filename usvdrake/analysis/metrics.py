@@ -38,7 +38,8 @@ def mission_metrics(
         "cross_track_rmse_m": float(np.sqrt(np.mean(reference[:, 2] ** 2))),
         "cross_track_max_m": float(np.max(np.abs(reference[:, 2]))),
         "final_distance_to_goal_m": float(np.linalg.norm(xy[-1] - goal)),
-        "min_clearance_m": float(np.min(clearance)),
+        # null when the world has no obstacles at the waterline
+        "min_clearance_m": float(np.min(clearance)) if np.isfinite(np.min(clearance)) else None,
         "collision_samples": int(np.sum(clearance < 0.0)),
         "thrust_saturated_fraction": float(np.mean(saturated)),
     }

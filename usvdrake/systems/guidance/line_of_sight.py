@@ -72,8 +72,11 @@ def los_reference(
     heading = wrap_angle(alpha + np.arctan2(-e, lookahead))
     goal = waypoints[-1]
     d_goal = float(np.linalg.norm(goal - position))
-    complete = index == len(waypoints) - 1 and d_goal <= acceptance_radius
-    speed = 0.0 if complete else cruise_speed * min(1.0, d_goal / slowdown_radius)
-    if index == len(waypoints) - 1 and d_goal < lookahead:
+    last = index == len(waypoints) - 1
+    complete = last and d_goal <= acceptance_radius
+    # Slow down only on the final leg: a closed route's goal may be its start.
+    speed = cruise_speed * min(1.0, d_goal / slowdown_radius) if last else cruise_speed
+    speed = 0.0 if complete else speed
+    if last and d_goal < lookahead:
         heading = float(np.arctan2(goal[1] - position[1], goal[0] - position[0]))
     return LosReference(float(heading), float(speed), float(e), d_goal, index, bool(complete))

@@ -1,5 +1,6 @@
 """``ThrustMixer``: per-thruster commands → generalised force τ (000 eq. 3), with saturation."""
 
+import numpy as np
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
@@ -43,7 +44,9 @@ def ThrustMixer_(T):
             return saturate(self._thrusters, u) if self._saturate else u
 
         def _calc_tau(self, context, output):
-            output.SetFromVector(mix(self._thrusters, self._applied(context)))
+            # Drake's Build() probes feedthrough with NaN inputs; NaN in, NaN out, no warning.
+            with np.errstate(invalid="ignore"):
+                output.SetFromVector(mix(self._thrusters, self._applied(context)))
 
         def _calc_applied(self, context, output):
             output.SetFromVector(self._applied(context))
