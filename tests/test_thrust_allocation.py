@@ -165,7 +165,7 @@ def test_mixer_saturates_and_is_linear_in_force():
 
 def test_mixer_system_autodiff_gradient_is_b():
     """∂τ/∂u of the AutoDiffXd mixer is B (inside the limits)."""
-    from pydrake.autodiffutils import InitializeAutoDiff, ExtractGradient
+    from pydrake.autodiffutils import ExtractGradient, InitializeAutoDiff
 
     v = load_vessel("roboat2")
     mixer = ThrustMixer(v.thrusters).ToAutoDiffXd()
