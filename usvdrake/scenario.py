@@ -9,7 +9,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from usvdrake.typed_yaml import ConfigError, load_typed
+from usvdrake.typed_yaml import ConfigError, get_dotted, load_typed, resolve_yaml
 from usvdrake.vessel import VESSEL_DIR, available_vessels
 
 SCENARIO_DIR = Path(__file__).parent / "scenarios"
@@ -102,6 +102,37 @@ class Scenario:
     simulation: SimulationConfig = field(default_factory=SimulationConfig)
 
 
+# Scenario values that must be > 0, and >= 0 (dotted keys, checked by validate_scenario).
+POSITIVE_KEYS = (
+    "duration",
+    "mission.acceptance_radius",
+    "mission.slowdown_radius",
+    "control.rate_hz",
+    "control.lookahead",
+    "control.heading_natural_frequency",
+    "control.heading_damping",
+    "control.surge_bandwidth",
+    "control.sway_bandwidth",
+    "visualization.rate_hz",
+    "visualization.trail_chunk",
+    "simulation.accuracy",
+    "simulation.max_step",
+    "environment.update_period",
+    "environment.waves.peak_period",
+    "environment.wind.gust_time_constant",
+    "environment.current.variation_time_constant",
+)
+NON_NEGATIVE_KEYS = (
+    "mission.speed",
+    "environment.current.speed",
+    "environment.current.variation_std",
+    "environment.wind.mean_speed",
+    "environment.wind.gust_std",
+    "environment.waves.significant_height",
+    "visualization.arrow_length",
+)
+
+
 def available_scenarios() -> list[str]:
     return sorted(p.stem for p in SCENARIO_DIR.glob("*.yaml"))
 
@@ -125,7 +156,6 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
         )
     if s.world not in available_worlds():
         raise ConfigError(file, "world", "one of " + ", ".join(available_worlds()), repr(s.world))
-    _positive(file, "duration", s.duration)
     if len(s.initial_state) != 6:
         raise ConfigError(
             file, "initial_state", "6 numbers [x y psi u v r]", f"{len(s.initial_state)} numbers"
@@ -137,40 +167,11 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
     for i, wp in enumerate(s.mission.waypoints):
         if len(wp) != 2:
             raise ConfigError(file, f"mission.waypoints[{i}]", "[x, y]", f"{len(wp)} numbers")
-    if s.mission.speed < 0:
-        raise ConfigError(file, "mission.speed", "a number >= 0", repr(s.mission.speed))
-    for key, value in [
-        ("mission.acceptance_radius", s.mission.acceptance_radius),
-        ("mission.slowdown_radius", s.mission.slowdown_radius),
-        ("control.rate_hz", s.control.rate_hz),
-        ("control.lookahead", s.control.lookahead),
-        ("control.heading_natural_frequency", s.control.heading_natural_frequency),
-        ("control.heading_damping", s.control.heading_damping),
-        ("control.surge_bandwidth", s.control.surge_bandwidth),
-        ("control.sway_bandwidth", s.control.sway_bandwidth),
-        ("visualization.rate_hz", s.visualization.rate_hz),
-        ("visualization.trail_chunk", s.visualization.trail_chunk),
-        ("simulation.accuracy", s.simulation.accuracy),
-        ("simulation.max_step", s.simulation.max_step),
-        ("environment.update_period", s.environment.update_period),
-        ("environment.waves.peak_period", s.environment.waves.peak_period),
-        ("environment.wind.gust_time_constant", s.environment.wind.gust_time_constant),
-        (
-            "environment.current.variation_time_constant",
-            s.environment.current.variation_time_constant,
-        ),
-    ]:
-        _positive(file, key, value)
-    for key, value in [
-        ("environment.current.speed", s.environment.current.speed),
-        ("environment.current.variation_std", s.environment.current.variation_std),
-        ("environment.wind.mean_speed", s.environment.wind.mean_speed),
-        ("environment.wind.gust_std", s.environment.wind.gust_std),
-        ("environment.waves.significant_height", s.environment.waves.significant_height),
-        ("visualization.arrow_length", s.visualization.arrow_length),
-    ]:
-        if value < 0:
-            raise ConfigError(file, key, "a number >= 0", repr(value))
+    for key in POSITIVE_KEYS:
+        _positive(file, key, get_dotted(s, key))
+    for key in NON_NEGATIVE_KEYS:
+        if get_dotted(s, key) < 0:
+            raise ConfigError(file, key, "a number >= 0", repr(get_dotted(s, key)))
     if s.environment.waves.components < 1:
         raise ConfigError(
             file,
@@ -198,18 +199,9 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
 
 def load_scenario(name_or_path: str | Path | None = None) -> Scenario:
     """Load a shipped scenario by name, or a scenario YAML file; None gives the demo scenario."""
-    if name_or_path is None:
-        name_or_path = DEFAULT_SCENARIO
-    path = Path(name_or_path)
-    if path.suffix not in (".yaml", ".yml"):
-        path = SCENARIO_DIR / f"{name_or_path}.yaml"
-        if not path.is_file():
-            raise ConfigError(
-                "scenario",
-                "name",
-                "one of " + ", ".join(available_scenarios()),
-                repr(str(name_or_path)),
-            )
+    path = resolve_yaml(
+        "scenario", DEFAULT_SCENARIO if name_or_path is None else name_or_path, SCENARIO_DIR
+    )
     s = load_typed(Scenario, path)
     if not s.name:
         s = dataclasses.replace(s, name=path.stem)

@@ -112,3 +112,22 @@ def load_typed(schema: type[T], filename: str | Path) -> T:
         raw = {}
     _check(schema, raw, "", str(path))
     return yaml_load_typed(schema=schema, filename=str(path), defaults=schema())
+
+
+def resolve_yaml(kind: str, name_or_path: str | Path, folder: Path) -> Path:
+    """A YAML path as given, or ``folder/NAME.yaml`` for a shipped name (else ConfigError)."""
+    path = Path(name_or_path)
+    if path.suffix in (".yaml", ".yml"):
+        return path
+    path = folder / f"{name_or_path}.yaml"
+    if not path.is_file():
+        names = ", ".join(sorted(p.stem for p in folder.glob("*.yaml")))
+        raise ConfigError(kind, "name", f"one of {names}", repr(str(name_or_path)))
+    return path
+
+
+def get_dotted(obj: Any, key: str) -> Any:
+    """``get_dotted(scenario, "mission.speed")`` → scenario.mission.speed."""
+    for part in key.split("."):
+        obj = getattr(obj, part)
+    return obj

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from usvdrake.typed_yaml import ConfigError, load_typed
+from usvdrake.typed_yaml import ConfigError, load_typed, resolve_yaml
 
 VESSEL_DIR = Path(__file__).parent / "vessels"
 
@@ -93,16 +93,7 @@ def _validate(params: VesselParams, file: Path) -> VesselParams:
 
 def load_vessel(name_or_path: str | Path) -> VesselParams:
     """Load a shipped vessel by name (``roboat2``, ``usv2000``, ``ntnu_round``) or a YAML path."""
-    path = Path(name_or_path)
-    if path.suffix not in (".yaml", ".yml"):
-        path = VESSEL_DIR / f"{name_or_path}.yaml"
-        if not path.is_file():
-            raise ConfigError(
-                "vessel",
-                "name",
-                "one of " + ", ".join(available_vessels()),
-                repr(str(name_or_path)),
-            )
+    path = resolve_yaml("vessel", name_or_path, VESSEL_DIR)
     return _validate(load_typed(VesselParams, path), path)
 
 
