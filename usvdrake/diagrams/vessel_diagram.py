@@ -47,11 +47,13 @@ def build_vessel_diagram(
         builder.ExportOutput(autonomy.GetOutputPort(name), name)
 
     if meshcat is not None:
-        from usvdrake.viz.meshcat_world import draw_world
+        from usvdrake.viz.meshcat_world import draw_world, look_at
         from usvdrake.viz.vessel_visualizer import VesselVisualizer
         from usvdrake.worlds import make_world
 
         draw_world(meshcat, make_world(scenario.world, scenario.seed))
+        x0, y0 = scenario.initial_state[:2]
+        look_at(meshcat, [x0, y0, 0.0], distance=15.0 * vessel.hull.length)
         viz = builder.AddNamedSystem(
             "vessel_visualizer",
             VesselVisualizer(meshcat, vessel, scenario.visualization, scenario.mission.waypoints),

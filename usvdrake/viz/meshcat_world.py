@@ -54,5 +54,5 @@ def draw_world(meshcat: Meshcat, world: World) -> None:
 
 def look_at(meshcat: Meshcat, target: np.ndarray, distance: float) -> None:
     """Put the camera behind-above ``target`` (a 3-vector) at roughly ``distance`` [m]."""
-    eye = np.asarray(target, float) + distance * np.array([-0.55, -0.55, 0.62])
+    eye = np.asarray(target, float) + distance * np.array([-0.75, -0.35, 0.55])
     meshcat.SetCameraPose(eye, np.asarray(target, float))
