@@ -68,6 +68,8 @@ def test_ntnu_round_geometry():
         (GOOD.replace("[[10.0, 0.0]]", "[[10.0, 0.0, 3.0]]"), "mission.waypoints[0]", "[x, y]"),
         (GOOD + "initial_state: [1, 2]\n", "initial_state", "6 numbers"),
         (GOOD + "seed: 1.5\n", "seed", "an integer"),
+        (GOOD.replace("[[10.0, 0.0]]", "[[30.0, 7.5]]"), "mission.waypoints[0]", "free water"),
+        (GOOD + "initial_state: [30, -20, 0, 0, 0, 0]\n", "initial_state", "free water"),
     ],
 )
 def test_bad_scenario_one_line(tmp_path, text, key, expected):

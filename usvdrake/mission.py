@@ -192,6 +192,7 @@ def run_mission(
         )
         _write_tum(out / "ground_truth.tum", times, states)
         (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+        (out / "diagram.dot").write_text(vessel_diagram.GetGraphvizString(max_depth=2))
         result.files.update(
             metrics=out / "metrics.json",
             report=out / "report.html",

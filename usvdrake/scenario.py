@@ -144,7 +144,7 @@ def _positive(file, key, value):
 
 def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
     """Check values the types cannot: ranges, names, sizes. Returns ``s`` unchanged."""
-    from usvdrake.worlds import available_worlds  # late: worlds import scenario types
+    from usvdrake.worlds import available_worlds, make_world  # late: worlds import scenario
 
     vessel_path = Path(s.vessel)
     if (
@@ -194,7 +194,23 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
             "one of " + ", ".join(integrators),
             repr(s.simulation.integrator),
         )
+    _check_free_water(s, file, make_world(s.world, s.seed))
     return s
+
+
+def _check_free_water(s: Scenario, file, world) -> None:
+    """The start and every waypoint must lie in water, clear of quays, boats and buildings."""
+    points = [("initial_state", s.initial_state[:2])]
+    points += [(f"mission.waypoints[{i}]", wp) for i, wp in enumerate(s.mission.waypoints)]
+    for key, (x, y) in points:
+        clearance = float(world.clearance(x, y))
+        if clearance <= 0.0:
+            raise ConfigError(
+                file,
+                key,
+                f"a point in free water of world '{s.world}'",
+                f"({x}, {y}), inside an obstacle",
+            )
 
 
 def load_scenario(name_or_path: str | Path | None = None) -> Scenario:
