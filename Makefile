@@ -23,8 +23,9 @@ format: $(STAMP)
 	$(BIN)/ruff format .
 	$(BIN)/ruff check --fix .
 
+# USVDRAKE_QUICK=1: notebooks take their short durations.
 test: lint
-	$(BIN)/python -m pytest -q
+	USVDRAKE_QUICK=1 $(BIN)/python -m pytest -q tests --nbmake notebooks
 
 bench: $(STAMP)
 	$(BIN)/usvdrake bench demo_speed
