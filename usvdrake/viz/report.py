@@ -22,13 +22,19 @@ KIND_COLORS = {
     "building": "#a0522d",
     "boat": "#9aa7b8",
     "bridge": "#4d4d52",
+    "rock": "#7a756f",
+    "tree": "#33692e",
+    "bush": "#478537",
+    "leaf": "#739e40",
+    "bank": "#73664d",
 }
 
 
-def _box_corners(b):
-    c, s = np.cos(b.yaw), np.sin(b.yaw)
-    local = np.array([[1, 1], [-1, 1], [-1, -1], [1, -1]]) * [b.lx / 2, b.ly / 2]
-    return local @ np.array([[c, s], [-s, c]]) + [b.x, b.y]
+def _water_patches(geom):
+    polys = list(geom.geoms) if hasattr(geom, "geoms") else [geom]
+    for p in polys:
+        if not p.is_empty:
+            yield np.asarray(p.exterior.coords), [np.asarray(r.coords) for r in p.interiors]
 
 
 def _png(fig) -> str:
@@ -51,14 +57,21 @@ def write_report(
     waypoints,
 ):
     fig, ax = plt.subplots(figsize=(9, 6))
-    for w in world.water:
-        ax.add_patch(Polygon(_box_corners(w), color="#bcd7ef", zorder=0))
-    for b in world.boxes:
+    wp = np.asarray(waypoints, float)
+    ax.set_facecolor("#d9d6cf")
+    for outer, holes in _water_patches(world.water):
+        ax.add_patch(Polygon(outer, color="#bcd7ef", zorder=0))
+        for h in holes:
+            ax.add_patch(Polygon(h, color="#d9d6cf", zorder=0))
+    for b in world.solids:
         alpha = 0.35 if b.kind == "bridge" else 1.0
         ax.add_patch(
-            Polygon(_box_corners(b), color=KIND_COLORS.get(b.kind, "#888"), alpha=alpha, zorder=1)
+            Polygon(b.footprint(), color=KIND_COLORS.get(b.kind, "#888"), alpha=alpha, zorder=1)
         )
-    wp = np.asarray(waypoints, float)
+    pad = 15.0  # zoom on the run, with a margin
+    xs, ys = np.concatenate([states[:, 0], wp[:, 0]]), np.concatenate([states[:, 1], wp[:, 1]])
+    ax.set_xlim(xs.min() - pad, xs.max() + pad)
+    ax.set_ylim(ys.min() - pad, ys.max() + pad)
     ax.plot(wp[:, 0], wp[:, 1], "o--", color="#2ca02c", label="waypoints", zorder=2)
     ax.plot(states[:, 0], states[:, 1], color="#d62728", lw=2, label="vessel", zorder=3)
     ax.set_aspect("equal")

@@ -1,11 +1,27 @@
-"""Worlds: generators by name, each seeded (``make_world("canal_demo", seed=0)``)."""
+"""Worlds: seeded generators by name (``make_world("amsterdam_canals", seed=0)``)."""
 
 from collections.abc import Callable
 
-from usvdrake.worlds.canal import canal_demo, open_water
-from usvdrake.worlds.world import Box, World, hull_clearance
+import shapely
+
+from usvdrake.worlds.canal import amsterdam_canals, canal_demo
+from usvdrake.worlds.solids import Solid, box, cylinder, prism
+from usvdrake.worlds.world import OccupancyGrid, World, hull_clearance
+
+
+def open_water(seed: int = 0) -> World:
+    """400 m × 400 m of calm water with no obstacles (identification and control tests)."""
+    return World(
+        name="open_water",
+        seed=seed,
+        water=shapely.box(-200, -200, 200, 200),
+        datum="charles_river",
+        description="open water, no obstacles",
+    )
+
 
 WORLDS: dict[str, Callable[[int], World]] = {
+    "amsterdam_canals": amsterdam_canals,
     "canal_demo": canal_demo,
     "open_water": open_water,
 }
@@ -21,4 +37,15 @@ def make_world(name: str, seed: int = 0) -> World:
     return WORLDS[name](seed)
 
 
-__all__ = ["Box", "World", "WORLDS", "available_worlds", "make_world", "hull_clearance"]
+__all__ = [
+    "OccupancyGrid",
+    "Solid",
+    "World",
+    "WORLDS",
+    "available_worlds",
+    "box",
+    "cylinder",
+    "hull_clearance",
+    "make_world",
+    "prism",
+]

@@ -1,180 +1,255 @@
-"""A canal along a centre-line polyline: quay walls, facades, moored boats and bridges.
+"""Canal networks: water from buffered centre lines, quay walls tiling the water's edge,
+facades behind a street, moored boats, and bridges (GPS-denied underneath).
 
-The generator is seeded: facade lengths and heights, and where boats are moored, come from
-``numpy.random.default_rng(seed)``. The ``canal_demo`` world is a short L-shaped canal with one
-bridge, the stage of the demo mission; the full ``amsterdam_canals`` network is built on the same
-pieces in the worlds issue.
+The water region is the union of each centre line buffered by half its width (shapely, flat ends,
+mitred joins), so junctions and loops come out right. The quay is the strip between the water's
+boundary and its outward mitred offset, cut into convex quadrilaterals of at most
+``QUAY_PIECE`` m; the facades are quadrilaterals between two further offsets, each with a random
+frontage and height. Everything random comes from ``numpy.random.default_rng(seed)``.
 """
 
-import numpy as np
+from dataclasses import dataclass
 
-from usvdrake.worlds.world import Box, World
+import numpy as np
+import shapely
+from shapely.geometry.polygon import orient
+
+from usvdrake.worlds.solids import Solid, box, prism
+from usvdrake.worlds.world import World
 
 QUAY_THICKNESS = 1.0  # [m]
 QUAY_HEIGHT = 1.0  # [m] quay top above the water (Amsterdam canals: ~1 m)
-STREET_WIDTH = 4.0  # [m] between the quay edge and the facades
+QUAY_PIECE = 10.0  # [m] longest quay piece (keeps solids small for culling)
+STREET_WIDTH = 4.0  # [m] between the quay and the facades
+BRIDGE_CLEARANCE = 2.4  # [m] underside above the water (Amsterdam: ~2.4 m on the ring canals)
+BRIDGE_DECK = 0.6  # [m] deck thickness
+BRIDGE_WIDTH = 8.0  # [m] along the canal
 
 
-def offset_polyline(points: np.ndarray, offset: float) -> np.ndarray:
-    """The polyline shifted ``offset`` [m] to its left, with mitred joins."""
-    p = np.asarray(points, float)
-    d = np.diff(p, axis=0)
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    n = np.stack([-d[:, 1], d[:, 0]], axis=1)
-    out = [p[0] + offset * n[0]]
-    for i in range(1, len(p) - 1):
-        m = n[i - 1] + n[i]
-        out.append(p[i] + offset * m / (1.0 + n[i - 1] @ n[i]))
-    out.append(p[-1] + offset * n[-1])
+@dataclass
+class Canal:
+    centre_line: list[list[float]]  # [[x, y], ...] [m]
+    width: float  # [m] water width
+
+
+def _densify_ring(ring: np.ndarray, step: float) -> np.ndarray:
+    """Closed ring (first ≠ last) with vertices at most ``step`` apart along each edge."""
+    out = []
+    for a, b in zip(ring, np.roll(ring, -1, axis=0), strict=True):
+        n = max(1, int(np.ceil(np.linalg.norm(b - a) / step)))
+        out.extend(a + (b - a) * (k / n) for k in range(n))
     return np.array(out)
 
 
-def boxes_overlap(a: Box, b: Box) -> bool:
-    """Whether two oriented box footprints intersect (separating-axis test)."""
-
-    def corners(bx):
-        c, s = np.cos(bx.yaw), np.sin(bx.yaw)
-        local = np.array([[1, 1], [-1, 1], [-1, -1], [1, -1]]) * [bx.lx / 2, bx.ly / 2]
-        return local @ np.array([[c, s], [-s, c]]) + [bx.x, bx.y]
-
-    ca, cb = corners(a), corners(b)
-    for yaw in (a.yaw, b.yaw):
-        for axis in (np.array([np.cos(yaw), np.sin(yaw)]), np.array([-np.sin(yaw), np.cos(yaw)])):
-            pa, pb = ca @ axis, cb @ axis
-            if pa.max() <= pb.min() or pb.max() <= pa.min():
-                return False
-    return True
+def _offset_ring(ring: np.ndarray, distance: float) -> np.ndarray:
+    """Mitred offset of a closed ring to the right of its direction (outward of the water for
+    shapely-oriented polygons: exterior counter-clockwise, holes clockwise)."""
+    e = np.roll(ring, -1, axis=0) - ring
+    e /= np.linalg.norm(e, axis=1, keepdims=True)
+    n = np.column_stack([e[:, 1], -e[:, 0]])  # right-hand normal of edge i
+    n_prev = np.roll(n, 1, axis=0)
+    m = n_prev + n
+    return ring + distance * m / np.maximum(1.0 + np.einsum("ij,ij->i", n_prev, n), 0.2)[:, None]
 
 
-def _box_along(kind, a, b, width, outward, z_min, z_max, shift=0.0, extend=0.0) -> Box:
-    """A box of ``width`` along segment a→b, pushed ``shift`` along the unit ``outward``."""
-    d = b - a
-    length = np.linalg.norm(d)
-    c = (a + b) / 2 + shift * outward
-    return Box(
-        kind, c[0], c[1], length + 2 * extend, width, float(np.arctan2(d[1], d[0])), z_min, z_max
-    )
+def _is_convex(quad: np.ndarray) -> bool:
+    e = np.roll(quad, -1, axis=0) - quad
+    cross = e[:, 0] * np.roll(e[:, 1], -1) - e[:, 1] * np.roll(e[:, 0], -1)
+    return bool(np.all(cross > 1e-9) or np.all(cross < -1e-9))
 
 
-def canal_world(
-    name: str, centre_line, width: float, seed: int, bridges_at=(), boats: int = 3
+def _rings(water) -> list[np.ndarray]:
+    polys = list(water.geoms) if hasattr(water, "geoms") else [water]
+    rings = []
+    for p in polys:
+        p = orient(p, sign=1.0)
+        for r in [p.exterior, *p.interiors]:
+            rings.append(np.asarray(r.coords)[:-1])
+    return rings
+
+
+def _strip(ring: np.ndarray, inner: float, outer: float) -> list[np.ndarray]:
+    """Convex quadrilaterals tiling the band between two offsets of a ring."""
+    a, b = _offset_ring(ring, inner) if inner else ring, _offset_ring(ring, outer)
+    quads = []
+    for i in range(len(ring)):
+        j = (i + 1) % len(ring)
+        q = np.array([a[i], a[j], b[j], b[i]])
+        if _is_convex(q):
+            quads.append(q)
+    return quads
+
+
+def canal_network(
+    name: str,
+    canals: list[Canal],
+    seed: int,
+    bridges=(),
+    boats: int = 0,
+    datum: str = "amsterdam",
+    description: str = "",
 ) -> World:
+    """A canal world. ``bridges``: [(canal index, arc length [m])]; ``boats``: how many moored."""
     rng = np.random.default_rng(seed)
-    pts = np.asarray(centre_line, float)
-    boxes, water = [], []
-    for side in (+1.0, -1.0):
-        edge = offset_polyline(pts, side * width / 2)
-        for a, b in zip(edge[:-1], edge[1:], strict=True):
-            d = (b - a) / np.linalg.norm(b - a)
-            outward = side * np.array([-d[1], d[0]])
-            boxes.append(
-                _box_along(
-                    "quay",
-                    a,
-                    b,
-                    QUAY_THICKNESS,
-                    outward,
-                    -1.0,
-                    QUAY_HEIGHT,
-                    QUAY_THICKNESS / 2,
-                    QUAY_THICKNESS,
-                )
-            )
-            # Facades: a row of buildings of random frontage and height behind the street.
-            seg_len = np.linalg.norm(b - a)
-            s = 2.0
-            while s < seg_len - 4.0:
-                frontage = min(rng.uniform(5.0, 9.0), seg_len - 2.0 - s)
-                p0, p1 = a + d * s, a + d * (s + frontage)
-                depth = 8.0
-                shift = QUAY_THICKNESS + STREET_WIDTH + depth / 2
-                boxes.append(
-                    _box_along(
-                        "building", p0, p1, depth, outward, 0.0, rng.uniform(8.0, 18.0), shift
-                    )
-                )
-                s += frontage + 0.3
-    # End walls (locks) close the canal so every ray ends somewhere.
-    for end, nxt in ((pts[0], pts[1]), (pts[-1], pts[-2])):
-        d = (end - nxt) / np.linalg.norm(end - nxt)
-        n = np.array([-d[1], d[0]])
-        a, b = end - n * (width / 2 + QUAY_THICKNESS), end + n * (width / 2 + QUAY_THICKNESS)
-        boxes.append(
-            _box_along("wall", a, b, QUAY_THICKNESS, d, -1.0, QUAY_HEIGHT, QUAY_THICKNESS / 2)
-        )
-    # Water patches, one per segment, overlapping by half a width at the interior joints.
-    for i, (a, b) in enumerate(zip(pts[:-1], pts[1:], strict=True)):
-        d = (b - a) / np.linalg.norm(b - a)
-        a = a - d * (width / 2 if i > 0 else 0.0)
-        b = b + d * (width / 2 if i < len(pts) - 2 else 0.0)
-        water.append(_box_along("water", a, b, width, np.zeros(2), 0.0, 0.0))
-    # Moored boats alongside the quays, away from the ends and the corners.
-    seg_lengths = np.linalg.norm(np.diff(pts, axis=0), axis=1)
-    for _ in range(boats):
-        i = int(rng.integers(len(seg_lengths)))
-        if seg_lengths[i] < 25.0:
-            continue
-        t = rng.uniform(10.0, seg_lengths[i] - 10.0)
-        a, b = pts[i], pts[i + 1]
-        d = (b - a) / seg_lengths[i]
-        side = rng.choice([-1.0, 1.0])
-        n = side * np.array([-d[1], d[0]])
-        beam = rng.uniform(1.6, 2.2)
-        centre = a + d * t + n * (width / 2 - beam / 2 - 0.3)
-        boxes.append(
-            Box(
-                "boat",
-                centre[0],
-                centre[1],
-                rng.uniform(5.0, 8.0),
-                beam,
-                float(np.arctan2(d[1], d[0])),
-                -0.4,
-                0.6,
-            )
-        )
-    # Bridges: decks across the canal at the given arc lengths, 2.4 m clear above the water.
-    cum = np.concatenate([[0.0], np.cumsum(seg_lengths)])
-    for s in bridges_at:
-        i = min(int(np.searchsorted(cum, s, side="right")) - 1, len(seg_lengths) - 1)
-        a, b = pts[i], pts[i + 1]
-        d = (b - a) / seg_lengths[i]
-        c = a + d * (s - cum[i])
+    lines = [shapely.LineString(c.centre_line) for c in canals]
+    water = shapely.union_all(
+        [
+            ln.buffer(c.width / 2, cap_style="flat", join_style="mitre")
+            for ln, c in zip(lines, canals, strict=True)
+        ]
+    )
+    water = shapely.simplify(water, 0.01)
+    solids: list[Solid] = []
+    rings = [_densify_ring(r, QUAY_PIECE) for r in _rings(water)]
+    for ring in rings:
+        solids += [prism("quay", q, -1.0, QUAY_HEIGHT) for q in _strip(ring, 0.0, QUAY_THICKNESS)]
+
+    # Facades: quads between two offsets of each ring resampled at random frontages; a
+    # candidate is dropped where it would reach the street or overlap an accepted neighbour.
+    street = QUAY_THICKNESS + STREET_WIDTH
+    keep_out = water.buffer(street - 0.05, join_style="mitre")
+    candidates = []
+    for ring in _rings(water):
+        dense = _densify_ring(ring, 1.0)
+        idx, k = [], 0
+        while k < len(dense):
+            idx.append(k)
+            k += int(rng.integers(5, 10))
+        if len(idx) >= 3:
+            depth = rng.uniform(8.0, 12.0)
+            candidates += [
+                (q, float(rng.uniform(8.0, 20.0)))
+                for q in _strip(dense[idx], street, street + depth)
+            ]
+    polys = shapely.polygons([q for q, _ in candidates]) if candidates else np.array([])
+    ok = (
+        shapely.is_valid(polys)
+        & (shapely.area(polys) > 10.0)
+        & ~shapely.intersects(polys, keep_out)
+    )
+    tree = shapely.STRtree(shapely.buffer(polys, -0.15))
+    accepted = np.zeros(len(candidates), bool)
+    for i in np.nonzero(ok)[0]:
+        hits = tree.query(polys[i].buffer(-0.15), predicate="intersects")
+        if not accepted[hits].any():
+            accepted[i] = True
+            q, height = candidates[i]
+            solids.append(prism("building", q, 0.0, height))
+
+    denied = []
+    for ci, s in bridges:
+        line, w = lines[ci], canals[ci].width
+        p, q = line.interpolate(s), line.interpolate(min(s + 0.5, line.length))
+        d = np.array([q.x - p.x, q.y - p.y])
         yaw = float(np.arctan2(d[1], d[0]))
-        boxes.append(
-            Box(
-                "bridge",
-                c[0],
-                c[1],
-                5.0,
-                width + 2 * (QUAY_THICKNESS + STREET_WIDTH),
-                yaw,
-                2.4,
-                3.0,
-            )
+        span = w + 2 * (QUAY_THICKNESS + STREET_WIDTH)
+        deck = box(
+            "bridge",
+            p.x,
+            p.y,
+            BRIDGE_WIDTH,
+            span,
+            yaw,
+            BRIDGE_CLEARANCE,
+            BRIDGE_CLEARANCE + BRIDGE_DECK,
         )
-    xy = np.array([[b.x, b.y] for b in boxes])
-    lo, hi = xy.min(axis=0) - 15.0, xy.max(axis=0) + 15.0
+        solids.append(deck)
+        denied.append(shapely.Polygon(deck.polygon).buffer(1.0))
+
+    # Moored boats alongside straight quay pieces, clear of bridges and of each other.
+    boat_zone = []
+    tries = 0
+    bridge_zone = shapely.union_all(denied).buffer(5.0) if denied else shapely.Polygon()
+    while len(boat_zone) < boats and tries < 50 * max(boats, 1):
+        tries += 1
+        ring = rings[int(rng.integers(len(rings)))]
+        i = int(rng.integers(len(ring)))
+        a, b = ring[i], ring[(i + 1) % len(ring)]
+        if np.linalg.norm(b - a) < QUAY_PIECE * 0.9:
+            continue
+        d = (b - a) / np.linalg.norm(b - a)
+        inward = np.array([-d[1], d[0]])  # left of the ring direction is the water
+        beam, length = rng.uniform(1.8, 2.6), rng.uniform(6.0, 9.0)
+        c = (a + b) / 2 + inward * (0.3 + beam / 2)
+        boat = box("boat", c[0], c[1], length, beam, float(np.arctan2(d[1], d[0])), -0.5, 0.7)
+        poly = shapely.Polygon(boat.polygon)
+        if (
+            not water.contains(poly)
+            or poly.intersects(bridge_zone)
+            or any(poly.distance(z) < 3.0 for z in boat_zone)
+        ):
+            continue
+        boat_zone.append(poly)
+        solids.append(boat)
     return World(
-        name=name, seed=seed, boxes=boxes, water=water, bounds=(lo[0], lo[1], hi[0], hi[1])
+        name=name,
+        seed=seed,
+        solids=solids,
+        water=water,
+        gps_denied=shapely.union_all(denied) if denied else shapely.Polygon(),
+        datum=datum,
+        description=description,
     )
 
 
 def canal_demo(seed: int = 0) -> World:
     """An L-shaped canal, 14 m wide, 80 m then 50 m, one bridge: the demo's stage."""
-    return canal_world(
+    return canal_network(
         "canal_demo",
-        [[-10.0, 0.0], [70.0, 0.0], [70.0, 50.0]],
-        width=14.0,
-        seed=seed,
-        bridges_at=(40.0,),
+        [Canal([[-10.0, 0.0], [70.0, 0.0], [70.0, 50.0]], 14.0)],
+        seed,
+        bridges=[(0, 40.0)],
         boats=3,
+        description="L-shaped canal with quays, facades, three moored boats and one bridge",
     )
 
 
-def open_water(seed: int = 0) -> World:
-    """Unbounded calm water with no obstacles (for identification and control tests)."""
-    patch = Box("water", 0.0, 0.0, 400.0, 400.0, 0.0, 0.0, 0.0)
-    return World(
-        name="open_water", seed=seed, boxes=[], water=[patch], bounds=(-200.0, -200.0, 200.0, 200.0)
+def _arc(radius: float, a0_deg: float, a1_deg: float, step: float = 10.0) -> list[list[float]]:
+    n = max(2, int(np.ceil(np.deg2rad(abs(a1_deg - a0_deg)) * radius / step)) + 1)
+    a = np.deg2rad(np.linspace(a0_deg, a1_deg, n))
+    return np.column_stack([radius * np.cos(a), radius * np.sin(a)]).tolist()
+
+
+def _radial(angle_deg: float, r0: float, r1: float) -> list[list[float]]:
+    a = np.deg2rad(angle_deg)
+    return [[r0 * np.cos(a), r0 * np.sin(a)], [r1 * np.cos(a), r1 * np.sin(a)]]
+
+
+def amsterdam_canals(seed: int = 0) -> World:
+    """A canal ring after Amsterdam's grachtengordel (000 §VI-A): two concentric arcs (radii
+    250 m and 330 m, 20 m wide, like Herengracht and Keizersgracht) joined by three radial
+    canals into closed loops, and a 45 m wide river (like the Amstel) crossing both for tracking
+    tests; 8 bridges, moored boats, facades 8-20 m tall. ~2.2 km of centre line. The local
+    frame's origin is the ring's centre."""
+    canals = [
+        Canal(_arc(250.0, 200.0, 340.0), 20.0),  # inner ring canal
+        Canal(_arc(330.0, 200.0, 340.0), 20.0),  # outer ring canal
+        Canal(_radial(200.0, 240.0, 340.0), 14.0),  # radial canals closing the loops
+        Canal(_radial(250.0, 240.0, 340.0), 14.0),
+        Canal(_radial(340.0, 240.0, 340.0), 14.0),
+        Canal(_radial(292.0, 170.0, 720.0), 45.0),  # the river
+    ]
+    inner, outer = np.deg2rad(1.0) * 250.0, np.deg2rad(1.0) * 330.0  # arc length per degree
+    bridges = [
+        (0, 30 * inner),
+        (0, 60 * inner),
+        (0, 120 * inner),
+        (1, 15 * outer),
+        (1, 50 * outer),
+        (1, 80 * outer),
+        (1, 125 * outer),
+        (5, 470.0),
+    ]
+    return canal_network(
+        "amsterdam_canals",
+        canals,
+        seed,
+        bridges=bridges,
+        boats=25,
+        datum="amsterdam",
+        description="Two ring canals, three radial canals and a river; 8 bridges, moored boats",
     )
+
+
+def centre_line_length(world_canals: list[Canal]) -> float:
+    return float(sum(shapely.LineString(c.centre_line).length for c in world_canals))

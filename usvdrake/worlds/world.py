@@ -1,58 +1,175 @@
-"""Worlds as data: oriented boxes (quays, facades, boats, bridges) and water patches.
+"""A world: solids, the water region, GPS-denied zones, and the queries everything else uses.
 
-One geometry serves Meshcat (``viz.meshcat_world``), the clearance metric here and, later, the
-simulated lidars. z is up from the water surface (z = 0).
+z is up from the water surface (z = 0). The water region is a shapely (Multi)Polygon: inside it
+and outside every solid is free water. Ground-truth occupancy (:meth:`World.occupancy`) uses the
+ROS convention: 0 free, 100 occupied (solids in the height band, and land), −1 unknown (never in
+ground truth; SLAM maps use it).
 """
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
+import shapely
+from scipy.spatial import cKDTree
+
+from usvdrake.worlds.solids import Solid
 
 
-@dataclass(frozen=True)
-class Box:
-    """An oriented box: centre (x, y) [m], size along its own axes (lx, ly) [m], yaw [rad],
-    vertical extent z_min..z_max [m] above the water surface."""
+@dataclass
+class OccupancyGrid:
+    origin: tuple[float, float]  # [m] world position of the corner of cell (0, 0)
+    resolution: float  # [m] cell size
+    data: np.ndarray  # (rows = y, cols = x) int8: 0 free, 100 occupied, −1 unknown
 
-    kind: str  # "quay", "building", "boat", "bridge", "wall", ...
-    x: float
-    y: float
-    lx: float
-    ly: float
-    yaw: float
-    z_min: float
-    z_max: float
+    FREE, OCCUPIED, UNKNOWN = 0, 100, -1
 
-    def signed_distance(self, px: np.ndarray, py: np.ndarray) -> np.ndarray:
-        """Signed distance [m] from points to the box footprint (negative inside)."""
-        c, s = np.cos(self.yaw), np.sin(self.yaw)
-        dx, dy = px - self.x, py - self.y
-        lx, ly = c * dx + s * dy, -s * dx + c * dy
-        qx, qy = np.abs(lx) - self.lx / 2, np.abs(ly) - self.ly / 2
-        outside = np.hypot(np.maximum(qx, 0.0), np.maximum(qy, 0.0))
-        inside = np.minimum(np.maximum(qx, qy), 0.0)
-        return outside + inside
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.data.shape
+
+    def cell_centres(self) -> tuple[np.ndarray, np.ndarray]:
+        rows, cols = self.data.shape
+        xs = self.origin[0] + (np.arange(cols) + 0.5) * self.resolution
+        ys = self.origin[1] + (np.arange(rows) + 0.5) * self.resolution
+        return xs, ys
+
+    def to_cell(self, x, y) -> tuple[np.ndarray, np.ndarray]:
+        """(row, col) of world points (may fall outside the grid)."""
+        col = np.floor((np.asarray(x) - self.origin[0]) / self.resolution).astype(int)
+        row = np.floor((np.asarray(y) - self.origin[1]) / self.resolution).astype(int)
+        return row, col
 
 
 @dataclass
 class World:
     name: str
     seed: int
-    boxes: list[Box] = field(default_factory=list)
-    water: list[Box] = field(default_factory=list)  # flat patches (z_min = z_max = 0) of water
-    bounds: tuple[float, float, float, float] = (-50.0, -50.0, 50.0, 50.0)  # xmin ymin xmax ymax
+    solids: list[Solid] = field(default_factory=list)
+    water: shapely.Geometry = field(default_factory=shapely.Polygon)  # the water region
+    gps_denied: shapely.Geometry = field(default_factory=shapely.Polygon)  # no fix inside
+    datum: str = "amsterdam"  # GPS datum of the local frame's origin
+    description: str = ""
 
-    def obstacles_at_waterline(self, height: float = 1.0) -> list[Box]:
-        """Boxes a hull of ``height`` [m] can hit (bridges above it are not obstacles)."""
-        return [b for b in self.boxes if b.z_min < height]
+    @property
+    def bounds(self) -> tuple[float, float, float, float]:
+        """xmin, ymin, xmax, ymax [m] of the water and every solid."""
+        boxes = [self.water.bounds] if not self.water.is_empty else []
+        if self.solids:
+            c = np.array([s.bounding_circle() for s in self.solids])
+            boxes.append(
+                (
+                    np.min(c[:, 0] - c[:, 2]),
+                    np.min(c[:, 1] - c[:, 2]),
+                    np.max(c[:, 0] + c[:, 2]),
+                    np.max(c[:, 1] + c[:, 2]),
+                )
+            )
+        b = np.array(boxes)
+        return (
+            float(b[:, 0].min()),
+            float(b[:, 1].min()),
+            float(b[:, 2].max()),
+            float(b[:, 3].max()),
+        )
 
-    def clearance(self, px, py, height: float = 1.0) -> np.ndarray:
-        """Distance [m] from points to the nearest obstacle footprint (negative: inside one)."""
-        px, py = np.asarray(px, float), np.asarray(py, float)
-        d = np.full(np.broadcast(px, py).shape, np.inf)
-        for b in self.obstacles_at_waterline(height):
-            d = np.minimum(d, b.signed_distance(px, py))
-        return d
+    @cached_property
+    def scene(self):
+        """The ray-casting acceleration structure, built once."""
+        from usvdrake.sensors.raycast import Scene
+
+        return Scene.from_solids(self.solids)
+
+    @cached_property
+    def _centres(self) -> tuple[cKDTree, np.ndarray]:
+        c = (
+            np.array([s.bounding_circle() for s in self.solids])
+            if self.solids
+            else np.zeros((0, 3))
+        )
+        return cKDTree(c[:, :2]), c[:, 2]
+
+    def obstacles(self, height: float = 1.0) -> list[int]:
+        """Indices of solids a hull reaching ``height`` [m] above the water can touch."""
+        return [i for i, s in enumerate(self.solids) if s.z_min < height and s.z_max > 0.0]
+
+    def clearance(self, px, py, height: float = 1.0, cutoff: float = 10.0) -> np.ndarray:
+        """Distance [m] from points to the nearest solid footprint (negative inside one), exact
+        up to ``cutoff``; points with nothing within ``cutoff`` get ``inf``."""
+        px, py = np.broadcast_arrays(np.asarray(px, float), np.asarray(py, float))
+        out = np.full(px.shape, np.inf)
+        if not self.solids:
+            return out
+        tree, radius = self._centres
+        pts = np.column_stack([px.ravel(), py.ravel()])
+        flat = out.ravel()
+        near = tree.query_ball_point(pts, r=float(radius.max()) + cutoff)
+        candidates = (
+            np.unique(np.concatenate([np.asarray(n, int) for n in near])) if len(near) else []
+        )
+        allowed = set(self.obstacles(height))
+        for i in candidates:
+            if int(i) in allowed:
+                flat[:] = np.minimum(
+                    flat, self.solids[int(i)].signed_distance(pts[:, 0], pts[:, 1])
+                )
+        flat[flat > cutoff] = np.inf
+        return flat.reshape(px.shape)
+
+    def in_water(self, px, py) -> np.ndarray:
+        return shapely.contains_xy(self.water, np.asarray(px, float), np.asarray(py, float))
+
+    def is_free(self, px, py, margin: float = 0.0, height: float = 1.0) -> np.ndarray:
+        """In the water region and farther than ``margin`` [m] from every solid."""
+        return self.in_water(px, py) & (self.clearance(px, py, height) > margin)
+
+    def gps_denied_at(self, px, py) -> np.ndarray:
+        if self.gps_denied.is_empty:
+            return np.zeros(np.broadcast(np.asarray(px), np.asarray(py)).shape, bool)
+        return shapely.contains_xy(self.gps_denied, np.asarray(px, float), np.asarray(py, float))
+
+    def sky_blocked(
+        self, x: float, y: float, z: float = 2.0, elevation_deg: float = 30.0, beams: int = 72
+    ) -> float:
+        """Fraction of azimuths whose line of sight at ``elevation_deg`` is blocked within
+        300 m: the urban-canyon measure that degrades GPS beside tall facades."""
+        from usvdrake.sensors.raycast import ColumnLayout, cast
+
+        layout = ColumnLayout(az0=0.0, daz=2 * np.pi / beams, count=beams)
+        r = cast(
+            self.scene, layout, [np.tan(np.deg2rad(elevation_deg))], np.array([x, y]), z, 0.0, 300.0
+        )
+        return float(np.mean(np.isfinite(r)))
+
+    def occupancy(
+        self, resolution: float, height_band: tuple[float, float] = (0.0, 1.0), bounds=None
+    ) -> OccupancyGrid:
+        """Ground-truth grid at ``resolution`` [m]: land and solids overlapping the height band
+        [m above water] are occupied, the rest of the water free."""
+        if not resolution > 0:
+            raise ValueError(f"occupancy: resolution must be positive, got {resolution}")
+        xmin, ymin, xmax, ymax = bounds or self.bounds
+        cols = int(np.ceil((xmax - xmin) / resolution))
+        rows = int(np.ceil((ymax - ymin) / resolution))
+        grid = OccupancyGrid(
+            (xmin, ymin), resolution, np.full((rows, cols), OccupancyGrid.OCCUPIED, np.int8)
+        )
+        xs, ys = grid.cell_centres()
+        water = shapely.contains_xy(self.water, *np.meshgrid(xs, ys))
+        grid.data[water] = OccupancyGrid.FREE
+        lo, hi = height_band
+        for s in self.solids:
+            if s.z_max < lo or s.z_min > hi:
+                continue
+            x, y, r = s.bounding_circle()
+            c0, c1 = np.searchsorted(xs, [x - r - resolution, x + r + resolution])
+            r0, r1 = np.searchsorted(ys, [y - r - resolution, y + r + resolution])
+            if c0 >= c1 or r0 >= r1:
+                continue
+            gx, gy = np.meshgrid(xs[c0:c1], ys[r0:r1])
+            inside = s.signed_distance(gx, gy) <= 0.5 * resolution  # cells the footprint touches
+            grid.data[r0:r1, c0:c1][inside] = OccupancyGrid.OCCUPIED
+        return grid
 
 
 def hull_outline(length: float, beam: float, n_per_side: int = 4) -> np.ndarray:
@@ -66,8 +183,8 @@ def hull_outline(length: float, beam: float, n_per_side: int = 4) -> np.ndarray:
 def hull_clearance(
     world: World, states: np.ndarray, length: float, beam: float, height: float
 ) -> np.ndarray:
-    """Per state [x y ψ ...], the distance [m] from the hull outline to the nearest obstacle
-    (negative when the hull overlaps one)."""
+    """Per state [x y ψ ...], the distance [m] from the hull outline to the nearest solid
+    (negative when the hull overlaps one; inf when nothing is within 10 m)."""
     outline = hull_outline(length, beam)
     states = np.atleast_2d(states)
     c, s = np.cos(states[:, 2]), np.sin(states[:, 2])
