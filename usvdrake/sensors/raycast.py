@@ -136,33 +136,39 @@ def _pairs(
 
 def _interval_2d(scene: Scene, solid: np.ndarray, o: np.ndarray, h: np.ndarray):
     """Exact [t_in, t_out] of horizontal distance where the line o + t h is inside the footprint."""
-    t_in = np.full(len(solid), -np.inf)
-    t_out = np.full(len(solid), np.inf)
-    prism = ~scene.is_cyl[solid]
+    cyl = scene.is_cyl[solid]
+    if not cyl.any():
+        return _interval_prism(scene, solid, o, h)
+    t_in = np.full(len(solid), np.inf)
+    t_out = np.full(len(solid), -np.inf)
+    prism = ~cyl
     if prism.any():
-        s, op, hp = solid[prism], o[prism], h[prism]
-        n, d = scene.edge_n[s], scene.edge_d[s]
-        den = np.einsum("pkj,pj->pk", n, hp)
-        num = d - np.einsum("pkj,pj->pk", n, op)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = num / den
-        enter = np.where(den < 0, t, -np.inf).max(axis=1)
-        leave = np.where(den > 0, t, np.inf).min(axis=1)
-        parallel_out = ((den == 0) & (num < 0)).any(axis=1)
-        t_in[prism] = np.where(parallel_out, np.inf, enter)
-        t_out[prism] = np.where(parallel_out, -np.inf, leave)
-    cyl = ~prism
-    if cyl.any():
-        s, oc, hc = solid[cyl], o[cyl], h[cyl]
-        f = oc - scene.cyl[s, :2]
-        b = np.einsum("pj,pj->p", f, hc)
-        c = np.einsum("pj,pj->p", f, f) - scene.cyl[s, 2] ** 2
-        disc = b * b - c
-        root = np.sqrt(np.maximum(disc, 0.0))
-        miss = disc < 0
-        t_in[cyl] = np.where(miss, np.inf, -b - root)
-        t_out[cyl] = np.where(miss, -np.inf, -b + root)
+        t_in[prism], t_out[prism] = _interval_prism(scene, solid[prism], o[prism], h[prism])
+    s, oc, hc = solid[cyl], o[cyl], h[cyl]
+    fx, fy = oc[:, 0] - scene.cyl[s, 0], oc[:, 1] - scene.cyl[s, 1]
+    b = fx * hc[:, 0] + fy * hc[:, 1]
+    disc = b * b - (fx * fx + fy * fy - scene.cyl[s, 2] ** 2)
+    root = np.sqrt(np.maximum(disc, 0.0))
+    miss = disc < 0
+    t_in[cyl] = np.where(miss, np.inf, -b - root)
+    t_out[cyl] = np.where(miss, -np.inf, -b + root)
     return t_in, t_out
+
+
+def _interval_prism(scene: Scene, solid: np.ndarray, o: np.ndarray, h: np.ndarray):
+    """Cyrus-Beck clipping of o + t h against each footprint's edge half-planes."""
+    n, d = scene.edge_n[solid], scene.edge_d[solid]
+    nx, ny = n[..., 0], n[..., 1]
+    den = nx * h[:, 0:1] + ny * h[:, 1:2]
+    num = d - nx * o[:, 0:1] - ny * o[:, 1:2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = num / den
+    enter = np.where(den < 0, t, -np.inf).max(axis=1)
+    leave = np.where(den > 0, t, np.inf).min(axis=1)
+    parallel_out = ((den == 0) & (num < 0)).any(axis=1)
+    enter[parallel_out] = np.inf
+    leave[parallel_out] = -np.inf
+    return enter, leave
 
 
 def cast(
@@ -218,19 +224,25 @@ def cast(
         h[hit2d],
     )
 
-    # Per ring: z slab of each solid, expressed in horizontal distance.
-    zl = (scene.z_min[solid] - origin_z)[:, None]
-    zh = (scene.z_max[solid] - origin_z)[:, None]
+    # Per ring: z slab of each solid, expressed in horizontal distance. For a rising beam the
+    # slab is [z_min, z_max] / tan e, for a falling one reversed; level beams are all-or-nothing.
+    zl = scene.z_min[solid] - origin_z
+    zh = scene.z_max[solid] - origin_z
     flat = tan_e == 0.0
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = np.where(flat, 0.0, 1.0 / np.where(flat, 1.0, tan_e))[None, :]
-        a, b = zl * inv, zh * inv
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    level_inside = (zl <= 0.0) & (zh >= 0.0)  # for horizontal beams
-    lo = np.where(flat[None, :], np.where(level_inside, -np.inf, np.inf), lo)
-    hi = np.where(flat[None, :], np.where(level_inside, np.inf, -np.inf), hi)
-    enter = np.maximum(t_in[:, None], lo)
-    leave = np.minimum(t_out[:, None], hi)
+    up = tan_e > 0.0
+    with np.errstate(divide="ignore"):
+        inv = np.where(flat, 0.0, 1.0 / np.where(flat, 1.0, tan_e))
+    inv_up, inv_down = np.where(up, inv, 0.0), np.where(up | flat, 0.0, inv)
+    enter = np.multiply.outer(zl, inv_up)
+    enter += np.multiply.outer(zh, inv_down)
+    np.maximum(enter, t_in[:, None], out=enter)
+    leave = np.multiply.outer(zh, inv_up)
+    leave += np.multiply.outer(zl, inv_down)
+    np.minimum(leave, t_out[:, None], out=leave)
+    if flat.any():
+        level_inside = (zl <= 0.0) & (zh >= 0.0)
+        enter[:, flat] = np.where(level_inside, t_in, np.inf)[:, None]
+        leave[:, flat] = np.where(level_inside, t_out, -np.inf)[:, None]
 
     cut = scene.cut[solid]
     has_cut = np.any(cut[:, :3] != 0.0, axis=1)
@@ -252,8 +264,9 @@ def cast(
                 tan_e < 0, (water_level - origin_z) / np.where(tan_e < 0, tan_e, -1.0), np.inf
             )
         limit = np.minimum(limit, t_water)
-    enter = np.maximum(enter, 0.0)
-    ok = (enter <= leave) & (enter <= limit[None, :])
+    np.maximum(enter, 0.0, out=enter)
+    np.minimum(leave, limit[None, :], out=leave)
+    ok = enter <= leave
     p_idx, r_idx = np.nonzero(ok)
     if p_idx.size:
         np.minimum.at(out, r_idx * cols + col[p_idx], enter[p_idx, r_idx] / cos_e[r_idx])
