@@ -9,17 +9,23 @@ from pydrake.systems.analysis import Simulator
 from usvdrake import build_vessel_diagram, load_scenario, load_vessel, run_mission
 from usvdrake.diagrams.station import make_sim_station
 from usvdrake.scenario import available_scenarios
+from usvdrake.worlds import make_world
 
 
 def test_station_ports():
     s = load_scenario("canal_demo")
-    station = make_sim_station(s, load_vessel(s.vessel))
+    vessel, world = load_vessel(s.vessel), make_world(s.world)
+    station = make_sim_station(s, vessel, world)
     assert station.get_name() == "station"
-    assert [station.get_input_port(i).get_name() for i in range(station.num_input_ports())] == [
-        "thruster_command"
-    ]
+    inputs = [station.get_input_port(i).get_name() for i in range(station.num_input_ports())]
+    assert inputs == ["thruster_command"]
     outs = {station.get_output_port(i).get_name() for i in range(station.num_output_ports())}
-    assert outs == {"thrust_measured", "ground_truth_state"}
+    assert outs == {"thrust_measured", "thrust_applied", "ground_truth_state"}
+    sensors = dataclasses.replace(s.sensors, enabled=["lidar2d", "lidar3d", "imu", "gps"])
+    full = make_sim_station(dataclasses.replace(s, sensors=sensors), vessel, world)
+    outs = {full.get_output_port(i).get_name() for i in range(full.num_output_ports())}
+    expected = {"thrust_measured", "thrust_applied", "ground_truth_state"}
+    assert outs == expected | {"lidar_scan", "lidar_points", "imu", "gps"}
 
 
 def test_vessel_diagram_structure_reads_like_the_picture():
@@ -27,7 +33,12 @@ def test_vessel_diagram_structure_reads_like_the_picture():
     names = {s.get_name() for s in d.GetSystems()}
     assert names == {"station", "autonomy"}
     station, autonomy = d.GetSubsystemByName("station"), d.GetSubsystemByName("autonomy")
-    assert {s.get_name() for s in station.GetSystems()} == {"thrust_mixer", "plant", "environment"}
+    assert {s.get_name() for s in station.GetSystems()} == {
+        "thrust_mixer",
+        "plant",
+        "environment",
+        "thrust_sensor",
+    }
     assert {s.get_name() for s in autonomy.GetSystems()} == {
         "oracle_estimator",
         "los_guidance",

@@ -81,7 +81,7 @@ def run_mission(
     period = 1.0 / scenario.visualization.rate_hz
     loggers = {
         name: LogVectorOutput(vessel_diagram.GetOutputPort(name), builder, period)
-        for name in ("ground_truth_state", "reference", "thrust_measured")
+        for name in ("ground_truth_state", "reference", "thrust_applied")
     }
     for name, logger in loggers.items():
         logger.set_name(f"log_{name}")
@@ -147,7 +147,7 @@ def run_mission(
     times = logs["ground_truth_state"].sample_times()
     states = logs["ground_truth_state"].data().T
     reference = logs["reference"].data().T
-    thrust = logs["thrust_measured"].data().T
+    thrust = logs["thrust_applied"].data().T
     metrics = {
         "scenario": scenario.name,
         "vessel": scenario.vessel,

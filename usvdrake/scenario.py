@@ -9,6 +9,10 @@ import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from usvdrake.sensors.gps_model import GpsConfig
+from usvdrake.sensors.imu_model import ImuConfig
+from usvdrake.sensors.lidar_model import LIDAR_PRESETS, LidarConfig
+from usvdrake.sensors.thrust_sensor import ThrustSensorConfig
 from usvdrake.typed_yaml import ConfigError, get_dotted, load_typed, resolve_yaml
 from usvdrake.vessel import VESSEL_DIR, available_vessels
 
@@ -85,6 +89,23 @@ class SimulationConfig:
     max_step: float = 0.1  # [s] largest integrator step
 
 
+SENSORS = ("lidar2d", "lidar3d", "imu", "gps")
+
+
+@dataclass
+class SensorsConfig:
+    # Which sensors the station carries (exports as ports): any of lidar2d, lidar3d, imu, gps.
+    # thrust_measured and ground_truth_state are always there.
+    enabled: list[str] = field(default_factory=list)
+    lidar2d: LidarConfig = field(default_factory=lambda: LidarConfig(preset="rplidar_a1"))
+    lidar3d: LidarConfig = field(
+        default_factory=lambda: LidarConfig(preset="vlp16", mount=[0.0, 0.0, 1.0, 0.0])
+    )
+    imu: ImuConfig = field(default_factory=ImuConfig)
+    gps: GpsConfig = field(default_factory=GpsConfig)
+    thrust: ThrustSensorConfig = field(default_factory=ThrustSensorConfig)
+
+
 @dataclass
 class Scenario:
     name: str = ""  # short identifier (defaults to the file name)
@@ -95,6 +116,7 @@ class Scenario:
     seed: int = 0  # seed of every random source (world, environment, later sensors)
     initial_state: list[float] = field(default_factory=lambda: [0.0] * 6)  # [x y ψ u v r]
     estimator: str = "oracle"  # "oracle": the autonomy reads ground truth (until SLAM lands)
+    sensors: SensorsConfig = field(default_factory=SensorsConfig)
     environment: EnvironmentConfig = field(default_factory=EnvironmentConfig)
     mission: MissionConfig = field(default_factory=MissionConfig)
     control: ControlConfig = field(default_factory=ControlConfig)
@@ -193,6 +215,42 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
             "simulation.integrator",
             "one of " + ", ".join(integrators),
             repr(s.simulation.integrator),
+        )
+    for i, name in enumerate(s.sensors.enabled):
+        if name not in SENSORS:
+            raise ConfigError(
+                file, f"sensors.enabled[{i}]", "one of " + ", ".join(SENSORS), repr(name)
+            )
+    for key, dims in (("lidar2d", 1), ("lidar3d", 2)):
+        cfg = getattr(s.sensors, key)
+        if cfg.preset not in LIDAR_PRESETS:
+            raise ConfigError(
+                file,
+                f"sensors.{key}.preset",
+                "one of " + ", ".join(sorted(LIDAR_PRESETS)),
+                repr(cfg.preset),
+            )
+        if (len(LIDAR_PRESETS[cfg.preset].elevations_deg) > 1) != (dims == 2):
+            kind = "a 3D" if dims == 2 else "a 2D"
+            raise ConfigError(
+                file, f"sensors.{key}.preset", f"{kind} lidar preset", repr(cfg.preset)
+            )
+        if len(cfg.mount) != 4:
+            raise ConfigError(
+                file, f"sensors.{key}.mount", "[x, y, z, yaw]", f"{len(cfg.mount)} numbers"
+            )
+        if not 0.0 <= cfg.dropout < 1.0:
+            raise ConfigError(
+                file, f"sensors.{key}.dropout", "a probability in [0, 1)", repr(cfg.dropout)
+            )
+    from usvdrake.sensors.geodesy import DATUMS
+
+    if s.sensors.gps.datum not in DATUMS:
+        raise ConfigError(
+            file,
+            "sensors.gps.datum",
+            "one of " + ", ".join(sorted(DATUMS)),
+            repr(s.sensors.gps.datum),
         )
     _check_free_water(s, file, make_world(s.world, s.seed))
     return s

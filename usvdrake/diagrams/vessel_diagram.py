@@ -7,6 +7,7 @@ from usvdrake.diagrams.autonomy import make_autonomy
 from usvdrake.diagrams.station import make_sim_station
 from usvdrake.scenario import Scenario
 from usvdrake.vessel import load_vessel
+from usvdrake.worlds import make_world
 
 
 def build_vessel_diagram(
@@ -23,8 +24,9 @@ def build_vessel_diagram(
     if hardware is not None:
         raise NotImplementedError("the hardware station arrives with the hardware-I/O issue")
     vessel = load_vessel(scenario.vessel)
+    world = make_world(scenario.world, scenario.seed)
     builder = DiagramBuilder()
-    station = builder.AddNamedSystem("station", make_sim_station(scenario, vessel))
+    station = builder.AddNamedSystem("station", make_sim_station(scenario, vessel, world))
     autonomy = builder.AddNamedSystem("autonomy", make_autonomy(scenario, vessel))
     builder.Connect(
         autonomy.GetOutputPort("thruster_command"), station.GetInputPort("thruster_command")
@@ -34,8 +36,9 @@ def build_vessel_diagram(
             station.GetOutputPort("ground_truth_state"), autonomy.GetInputPort("ground_truth_state")
         )
 
-    for name in ("thrust_measured", "ground_truth_state"):
-        builder.ExportOutput(station.GetOutputPort(name), name)
+    for i in range(station.num_output_ports()):
+        name = station.get_output_port(i).get_name()
+        builder.ExportOutput(station.get_output_port(i), name)
     for name in (
         "thruster_command",
         "mission_complete",
@@ -49,9 +52,8 @@ def build_vessel_diagram(
     if meshcat is not None:
         from usvdrake.viz.meshcat_world import draw_world, look_at
         from usvdrake.viz.vessel_visualizer import VesselVisualizer
-        from usvdrake.worlds import make_world
 
-        draw_world(meshcat, make_world(scenario.world, scenario.seed))
+        draw_world(meshcat, world)
         x0, y0 = scenario.initial_state[:2]
         look_at(meshcat, [x0, y0, 0.0], distance=15.0 * vessel.hull.length)
         viz = builder.AddNamedSystem(

@@ -8,8 +8,8 @@ pipeline::
       +step +proj=cart +ellps=WGS84                     geodetic (λ, φ, h) → ECEF (X, Y, Z)
       +step +proj=topocentric +ellps=WGS84 +lat_0=φ0 +lon_0=λ0 +h_0=h0   ECEF → ENU (e, n, u)
 
-(PROJ's ``topocentric`` operation, EPSG method 9837 "Geocentric/topocentric conversions", IOGP
-Guidance Note 7-2 §4.1.2). It is a rotation and translation of ECEF, so it is exact at any
+(PROJ's ``topocentric`` operation: the geocentric/topocentric conversion of IOGP Guidance Note
+7-2, after the geodetic → geocentric one). It is a rotation and translation of ECEF, exact at any
 distance; the flat-world ENU plane and the curved Earth part ways only through the ``u``
 coordinate (≈ d²/2R: 8 cm at 1 km, 2 m at 5 km), which is why a GPS fix carries its own
 altitude. Latitude and longitude are in degrees, heights above the WGS84 ellipsoid in metres.

@@ -78,7 +78,6 @@ LIDAR_PRESETS: dict[str, LidarPreset] = {
 
 @dataclass
 class LidarConfig:
-    enabled: bool = False  # add this sensor to the station
     preset: str = "rplidar_a1"  # one of LIDAR_PRESETS
     rate_hz: float = 0.0  # [Hz] override the preset's rate (0: the preset's)
     range_max: float = 0.0  # [m] override the preset's maximum range (0: the preset's)

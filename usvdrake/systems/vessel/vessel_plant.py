@@ -26,12 +26,13 @@ def VesselPlant_(T):
             - current
             output_ports:
             - state
+            - acceleration
 
         ``tau`` [N, N, N m] is the thrusters' generalised force (body frame); ``tau_env``
         (optional, zero when unconnected) the environmental force (body frame); ``current``
         (optional, zero when unconnected) the water velocity [m/s] in the world frame, felt
-        through the drag only (see ``vessel_dynamics``). The output does not depend on the
-        inputs (no direct feedthrough).
+        through the drag only (see ``vessel_dynamics``). ``state`` does not depend on the
+        inputs (no direct feedthrough); ``acceleration`` = [u̇ v̇ ṙ] (body frame, for the IMU) does.
         """
 
         def _construct(self, params: VesselParams, initial_state=None, converter=None):
@@ -48,6 +49,7 @@ def VesselPlant_(T):
             self.DeclareVectorOutputPort(
                 "state", 6, self._calc_state, prerequisites_of_calc={self.xc_ticket()}
             )
+            self.DeclareVectorOutputPort("acceleration", 3, self._calc_acceleration)
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other._params, other._initial_state, converter=converter)
@@ -61,16 +63,24 @@ def VesselPlant_(T):
                 return port.Eval(context)
             return np.zeros(size)
 
-        def DoCalcTimeDerivatives(self, context, derivatives):
+        def _qdot(self, context):
             q = context.get_continuous_state_vector().CopyToVector()
-            qdot = vessel_derivatives(
-                self._params.hydrodynamics,
-                q,
-                self._tau.Eval(context),
-                self._optional(self._tau_env, context, 3),
-                self._optional(self._current, context, 2),
-            )
-            derivatives.get_mutable_vector().SetFromVector(qdot)
+            # Drake's Build() probes feedthrough with NaN inputs: NaN in, NaN out, no warning
+            # (a NaN reaching the integrator in a real run stops it with its own error).
+            with np.errstate(invalid="ignore"):
+                return vessel_derivatives(
+                    self._params.hydrodynamics,
+                    q,
+                    self._tau.Eval(context),
+                    self._optional(self._tau_env, context, 3),
+                    self._optional(self._current, context, 2),
+                )
+
+        def DoCalcTimeDerivatives(self, context, derivatives):
+            derivatives.get_mutable_vector().SetFromVector(self._qdot(context))
+
+        def _calc_acceleration(self, context, output):
+            output.SetFromVector(self._qdot(context)[3:6])
 
         def _calc_state(self, context, output):
             output.SetFromVector(context.get_continuous_state_vector().CopyToVector())
