@@ -80,6 +80,11 @@ class VisualizationConfig:
     rate_hz: float = 10.0  # [Hz] Meshcat update and replay frame rate
     trail_chunk: float = 2.0  # [s] the trail is drawn in pieces of this length
     arrow_length: float = 0.0  # [m] thrust arrow length at full force; 0: half the hull length
+    lidar_hits: bool = False  # draw the lidars' returns (live; the replay keeps the last ones)
+    gps_denied: bool = True  # draw the world's GPS-denied zones (translucent red)
+    occupancy_resolution: float = (
+        0.0  # [m] draw the ground-truth occupancy at this cell size; 0: off
+    )
 
 
 @dataclass
@@ -152,6 +157,7 @@ NON_NEGATIVE_KEYS = (
     "environment.wind.gust_std",
     "environment.waves.significant_height",
     "visualization.arrow_length",
+    "visualization.occupancy_resolution",
 )
 
 
@@ -245,7 +251,7 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
             )
     from usvdrake.sensors.geodesy import DATUMS
 
-    if s.sensors.gps.datum not in DATUMS:
+    if s.sensors.gps.datum and s.sensors.gps.datum not in DATUMS:
         raise ConfigError(
             file,
             "sensors.gps.datum",

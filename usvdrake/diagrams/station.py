@@ -5,6 +5,8 @@ Ports (DESIGN.md): input ``thruster_command``; outputs ``thrust_measured``, the 
 ``ground_truth_state``. The hardware station exports the same names.
 """
 
+import dataclasses
+
 from pydrake.systems.framework import Diagram, DiagramBuilder
 
 from usvdrake.scenario import Scenario
@@ -63,10 +65,15 @@ def make_sim_station(scenario: Scenario, vessel: VesselParams, world: World) -> 
         builder.ExportOutput(imu.GetOutputPort("imu"), "imu")
     if "gps" in sensors.enabled:
         antenna = sensors.gps.antenna_height
+        gps_cfg = (
+            sensors.gps
+            if sensors.gps.datum
+            else dataclasses.replace(sensors.gps, datum=world.datum)
+        )
         gps = builder.AddNamedSystem(
             "gps",
             Gps(
-                sensors.gps,
+                gps_cfg,
                 scenario.seed,
                 denied=lambda x, y: bool(world.gps_denied_at(x, y)),
                 sky_blocked=lambda x, y: world.sky_blocked(x, y, antenna),

@@ -50,10 +50,27 @@ def build_vessel_diagram(
         builder.ExportOutput(autonomy.GetOutputPort(name), name)
 
     if meshcat is not None:
-        from usvdrake.viz.meshcat_world import draw_world, look_at
+        from usvdrake.viz.lidar_visualizer import LidarVisualizer
+        from usvdrake.viz.meshcat_world import draw_occupancy, draw_world, look_at
         from usvdrake.viz.vessel_visualizer import VesselVisualizer
 
-        draw_world(meshcat, world)
+        viz_cfg = scenario.visualization
+        draw_world(meshcat, world, show_gps_denied=viz_cfg.gps_denied)
+        if viz_cfg.occupancy_resolution > 0:
+            draw_occupancy(meshcat, world.occupancy(viz_cfg.occupancy_resolution))
+        if viz_cfg.lidar_hits:
+            for port, name, cfg, three_d in (
+                ("lidar_scan", "lidar_2d", scenario.sensors.lidar2d, False),
+                ("lidar_points", "lidar_3d", scenario.sensors.lidar3d, True),
+            ):
+                if station.HasOutputPort(port):
+                    hits = builder.AddNamedSystem(
+                        f"{name}_visualizer", LidarVisualizer(meshcat, name, cfg.mount, three_d)
+                    )
+                    builder.Connect(
+                        station.GetOutputPort("ground_truth_state"), hits.GetInputPort("state")
+                    )
+                    builder.Connect(station.GetOutputPort(port), hits.GetInputPort("lidar"))
         x0, y0 = scenario.initial_state[:2]
         look_at(meshcat, [x0, y0, 0.0], distance=15.0 * vessel.hull.length)
         viz = builder.AddNamedSystem(

@@ -46,7 +46,7 @@ STREAM_GPS_INITIAL, STREAM_GPS_POSITION, STREAM_GPS_VELOCITY = 101, 102, 103
 @dataclass
 class GpsConfig:
     enabled: bool = True  # False: the receiver never has a fix (every output invalid)
-    datum: str = "amsterdam"  # origin of the world ENU frame, a name in geodesy.DATUMS
+    datum: str = ""  # origin of the world ENU frame, a name in geodesy.DATUMS; "": the world's
     # [Hz] fix rate. u-blox M8/F9 receivers navigate at 1-10 Hz (F9P up to 20 Hz); 5 Hz leaves
     # SLAM's 10 Hz keyframes (000 §VI) a fresh fix every other frame.
     rate_hz: float = 5.0
@@ -93,7 +93,8 @@ class GpsModel:
         if cfg.rate_hz <= 0:
             raise ValueError(f"GpsConfig.rate_hz must be positive, got {cfg.rate_hz}")
         self.cfg, self.seed = cfg, seed
-        self.frame = LocalFrame(cfg.datum)
+        # "" means the world's datum; the station fills it in, a bare model uses Amsterdam.
+        self.frame = LocalFrame(cfg.datum or "amsterdam")
         self.period = 1.0 / cfg.rate_hz  # [s]
         phi_n = gauss_markov_phi(self.period, cfg.noise_time_constant)
         self._phi = np.array(

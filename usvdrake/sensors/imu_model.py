@@ -30,9 +30,11 @@ Default numbers: **LORD/HBK MicroStrain 3DM-GX5-25** AHRS — the IMU of LIO-SAM
 8400-0093 rev N: gyro noise density 0.005 °/s/√Hz, bias instability 8 °/h, initial bias error
 ±0.04 °/s; accelerometer noise density 20 µg/√Hz (0.00002 g/√Hz), bias instability 0.04 mg,
 initial bias error ±0.002 g; EKF heading accuracy ±0.8° RMS. The two noise densities are as
-quoted from rev N by the DARPA SubT virtual-vehicle docs (MARBLE Husky, 3DM-GX5-25); the initial
-bias errors and the heading accuracy are read as 1σ and are worth re-checking against the
-current revision. The correlation times are not on the datasheet: 300 s (bias) and 20 s
+quoted from rev N by the DARPA SubT virtual-vehicle docs (MARBLE Husky, 3DM-GX5-25); NOT checked
+against the datasheet itself here (another secondary summary gives 80 µg/√Hz for the
+accelerometer); the initial bias errors and the heading accuracy are read as 1σ. Re-check all
+of these against the current datasheet revision before trusting absolute noise levels. The
+correlation times are not on the datasheet: 300 s (bias) and 20 s
 (heading) are modelling choices.
 """
 

@@ -120,6 +120,18 @@ def draw_world(meshcat: Meshcat, world: World, show_gps_denied: bool = True) -> 
         meshcat.SetTriangleMesh("/world/gps_denied", mesh[0].T, mesh[1].T, DENIED)
 
 
+def draw_occupancy(meshcat: Meshcat, grid, path: str = "/world/occupancy") -> None:
+    """Occupied cells of an :class:`~usvdrake.worlds.world.OccupancyGrid` as points at z = 0.05."""
+    from usvdrake.viz.lidar_visualizer import to_drake_cloud
+
+    rows, cols = np.nonzero(grid.data == grid.OCCUPIED)
+    xs, ys = grid.cell_centres()
+    pts = np.column_stack([xs[cols], ys[rows], np.full(len(rows), 0.05)])
+    meshcat.SetObject(
+        path, to_drake_cloud(pts), point_size=grid.resolution, rgba=Rgba(0.9, 0.1, 0.1, 0.6)
+    )
+
+
 def look_at(meshcat: Meshcat, target: np.ndarray, distance: float) -> None:
     """Put the camera behind-above ``target`` (a 3-vector) at roughly ``distance`` [m]."""
     eye = np.asarray(target, float) + distance * np.array([-0.75, -0.35, 0.55])

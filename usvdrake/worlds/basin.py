@@ -10,9 +10,12 @@ across the 6.45 m width, z up from the water surface. The wave generator closes 
 Only the basin's size comes from 003; the paper shows the set-up in photographs (Figs. 14, 16)
 that the text extraction lost, so the positions, sizes and heights below are guesses, chosen so
 that a 0.548 m round vessel (003, Experimental Platform) whose planner inflates the map by 0.4 m
-(003, Path Planning) reaches every part of the basin: corridors and gaps are at least 1.8 m wide,
-which leaves room for a disc of radius 0.3 m + 0.4 m on a 0.1 m grid. Everything random comes
-from ``numpy.random.default_rng(seed)`` and only moves things within those limits.
+(003, Map Processing) reaches every part of the basin: a disc of radius 0.3 m + 0.4 m must pass
+every corridor and gap, which on a 0.1 m ground-truth grid (each wall also blackens the cells it
+touches) takes 1.8 m. The narrow passage is therefore 1.8-2.0 m wide (003 gives no width); with
+~0.6 m free on each side of the vessel it is still where the velocity law slows it down.
+Everything random comes from ``numpy.random.default_rng(seed)`` and only moves things within
+those limits.
 """
 
 import numpy as np

@@ -15,6 +15,8 @@ from scipy.spatial import cKDTree
 
 from usvdrake.worlds.solids import Solid
 
+SKY_CELL = 2.0  # [m] resolution of the memoised sky-blockage map
+
 
 @dataclass
 class OccupancyGrid:
@@ -50,6 +52,7 @@ class World:
     gps_denied: shapely.Geometry = field(default_factory=shapely.Polygon)  # no fix inside
     datum: str = "amsterdam"  # GPS datum of the local frame's origin
     description: str = ""
+    _sky_cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def bounds(self) -> tuple[float, float, float, float]:
