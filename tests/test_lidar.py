@@ -132,7 +132,7 @@ def test_presets_match_their_datasheets():
 
 
 def test_wrong_dimension_preset_is_rejected():
-    with pytest.raises(ValueError, match="Lidar3D"):
+    with pytest.raises(ValueError, match="for Lidar3D"):
         Lidar2D(dataclasses.replace(LidarConfig(), preset="vlp16"), ROOM.scene, 0)
-    with pytest.raises(ValueError, match="Lidar2D"):
+    with pytest.raises(ValueError, match="for Lidar2D"):
         Lidar3D(LidarConfig(preset="rplidar_a1"), ROOM.scene, 0)

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from usvdrake.random_streams import white_vector
 from usvdrake.sensors.geodesy import LocalFrame
 from usvdrake.sensors.messages import GpsFix
 
@@ -66,12 +67,6 @@ class GpsConfig:
     antenna_height: float = 1.0  # [m] antenna above the waterline (mast on a small USV)
     satellites_open_sky: int = 16  # [-] satellites used with open sky (multi-constellation)
     hdop_open_sky: float = 0.8  # [-] horizontal dilution of precision with open sky
-
-
-def white_vector(seed: int, stream: int, k: int, n: int) -> np.ndarray:
-    """n standard-normal samples for step k of a stream, independent of evaluation order
-    (the vector form of ``environment_model.white_sample``: one generator per step)."""
-    return np.random.default_rng([seed, stream, k]).standard_normal(n)
 
 
 def gauss_markov_phi(period: float, time_constant: float) -> float:

@@ -43,7 +43,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from usvdrake.sensors.gps_model import gauss_markov_phi, white_vector
+from usvdrake.random_streams import white_vector
+from usvdrake.sensors.gps_model import gauss_markov_phi
 from usvdrake.sensors.messages import ImuSample
 
 STANDARD_GRAVITY = 9.80665  # [m/s^2] the "g" of datasheets (µg, mg)

@@ -1,12 +1,11 @@
 """``Lidar3D``: a spinning multi-ring lidar (Velodyne VLP-16) sampled at its rotation rate."""
 
 import numpy as np
-from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import LeafSystem
 
-from usvdrake.sensors.lidar_model import LidarConfig, LidarModel, preset_by_name
+from usvdrake.sensors.lidar_model import LidarConfig, Sweep
 from usvdrake.sensors.messages import PointCloud
 from usvdrake.sensors.raycast import Scene
+from usvdrake.sensors.sampled_lidar import SampledLidar
 
 STREAM_LIDAR3D = 30
 
@@ -22,9 +21,10 @@ def sweep_to_cloud(
     return pts, ring, col, column_time[col]
 
 
-class Lidar3D(LeafSystem):
+class Lidar3D(SampledLidar):
     """Casts one full sweep every 1/rate s and holds it as a ``PointCloud``: the organised
-    range image (ring × column) and the valid points in the sensor frame of their firing time.
+    range image (ring × column) and the valid points in the sensor frame of their firing time,
+    each with its ring, column and time offset (for de-skewing).
 
     .. pydrake_system::
 
@@ -36,44 +36,24 @@ class Lidar3D(LeafSystem):
     """
 
     def __init__(self, cfg: LidarConfig, scene: Scene, seed: int, stream: int = STREAM_LIDAR3D):
-        super().__init__()
-        preset = preset_by_name(cfg.preset)
-        if len(preset.elevations_deg) < 2:
-            raise ValueError(f"Lidar3D: preset {cfg.preset!r} is a 2D lidar; use Lidar2D")
-        self._model = LidarModel(preset, cfg, scene, seed, stream)
-        self._elev = np.deg2rad(np.asarray(preset.elevations_deg))
-        self._az = self._model.layout.azimuths
-        empty = PointCloud(
-            elevations=self._elev,
-            azimuths=self._az,
-            range_image=np.full((len(self._elev), len(self._az)), np.inf),
-        )
-        self._state = self.DeclareVectorInputPort("state", 6)
-        self._cloud = self.DeclareAbstractState(AbstractValue.Make(empty))
-        self._seq = self.DeclareDiscreteState(1)
-        period = 1.0 / self._model.rate
-        self.DeclarePeriodicUnrestrictedUpdateEvent(period, period, self._update)
-        self.DeclareStateOutputPort("lidar_points", self._cloud)
+        super().__init__(cfg, scene, seed, stream, three_d=True, port_name="lidar_points")
 
-    @property
-    def period(self) -> float:
-        return 1.0 / self._model.rate
-
-    def _update(self, context, state):
-        k = int(context.get_discrete_state(self._seq).GetAtIndex(0))
-        sweep = self._model.sweep(self._state.Eval(context), k)
-        pts, ring, col, t = sweep_to_cloud(sweep.ranges, self._az, self._elev, sweep.column_time)
-        cloud = PointCloud(
-            time=context.get_time(),
-            elevations=self._elev,
-            azimuths=self._az,
-            range_image=sweep.ranges,
-            points=pts,
-            ring=ring,
-            column=col,
-            point_time=t,
-            sweep_time=sweep.sweep_time,
-            motion_applied=self._model.cfg.motion,
+    def empty_message(self) -> PointCloud:
+        m = self._model
+        elev = np.deg2rad(np.asarray(m.preset.elevations_deg))
+        return PointCloud(
+            elevations=elev,
+            azimuths=m.layout.azimuths,
+            range_image=np.full((len(elev), m.layout.count), np.inf),
+            sweep_time=m.sweep_time,
+            motion_applied=m.cfg.motion,
         )
-        state.get_mutable_abstract_state(self._cloud).set_value(cloud)
-        state.get_mutable_discrete_state(self._seq).SetAtIndex(0, k + 1)
+
+    def make_message(self, sweep: Sweep, time: float) -> PointCloud:
+        cloud = self.empty_message()
+        pts, ring, col, t = sweep_to_cloud(
+            sweep.ranges, cloud.azimuths, cloud.elevations, sweep.column_time
+        )
+        cloud.time, cloud.range_image = time, sweep.ranges
+        cloud.points, cloud.ring, cloud.column, cloud.point_time = pts, ring, col, t
+        return cloud

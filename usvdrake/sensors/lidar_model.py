@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from usvdrake.random_streams import generator
 from usvdrake.sensors.raycast import ColumnLayout, Scene, cast
 
 
@@ -172,7 +173,7 @@ class LidarModel:
                 self.preset.range_min,
             )
         if self.cfg.noise or self.cfg.dropout > 0:
-            rng = np.random.default_rng([self.seed, self.stream, k])
+            rng = generator(self.seed, self.stream, k)
             if self.cfg.noise:
                 sigma = self.preset.noise_const + self.preset.noise_prop * np.where(
                     np.isfinite(ranges), ranges, 0.0

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from pydrake.systems.framework import LeafSystem
 
-from usvdrake.sensors.gps_model import white_vector
+from usvdrake.random_streams import white_vector
 from usvdrake.vessel import Thruster
 
 STREAM_THRUST = 301

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from usvdrake.random_streams import white_sample
 from usvdrake.scenario import EnvironmentConfig
 from usvdrake.vessel import VesselParams
 
@@ -36,11 +37,6 @@ def gauss_markov_step(x: float, sigma: float, time_constant: float, h: float, w:
     """One exact step of dx = −x/T dt + σ √(2/T) dW (stationary std σ) over h, white sample w."""
     phi = np.exp(-h / time_constant)
     return phi * x + sigma * np.sqrt(1.0 - phi * phi) * w
-
-
-def white_sample(seed: int, stream: int, k: int) -> float:
-    """The k-th standard-normal sample of a stream, independent of evaluation order."""
-    return float(np.random.default_rng([seed, stream, k]).standard_normal())
 
 
 def pierson_moskowitz(omega: np.ndarray, hs: float, tp: float) -> np.ndarray:
