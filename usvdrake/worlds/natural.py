@@ -13,8 +13,8 @@ the water. Everything random comes from ``numpy.random.default_rng(seed)``.
 
 002 gives the worlds' sizes and sensors but no geometry (its figures were lost in the text
 extraction): every size, count and height below is a guess, stated with its reason. Counts are
-kept such that a 1081-beam Hokuyo scan from 10-30 m off the valley's shore casts in about 1 ms
-(the ray caster's cost grows with the number of (solid, beam) pairs).
+kept such that a 1081-beam Hokuyo scan from 10-30 m off the valley's shore casts well within
+1 ms (~1500 (solid, beam) pairs, ~0.4 ms; the ray caster's cost grows with that number).
 
 The local frame's origin is each lake's middle; x east, y north, z up from the water.
 """
@@ -100,14 +100,19 @@ def _along_shore(ring: np.ndarray, rng: np.random.Generator, count: int):
     return ring[i] + f[:, None] * e[i], n
 
 
-def _rock(rng: np.random.Generator, x: float, y: float, radius: float, top: float) -> Solid:
-    """A boulder: the convex hull of 5-6 points at random bearings and 60-100 % of ``radius``
-    [m] (at most 6 vertices, which keeps the ray caster's padded edge arrays small)."""
+def _blob(rng: np.random.Generator, x: float, y: float, radius: float) -> np.ndarray:
+    """An irregular convex footprint: the hull of 5-6 points at random bearings and 60-100 % of
+    ``radius`` [m] from (x, y) (at most 6 vertices keeps the ray caster's padded edge arrays
+    small)."""
     k = int(rng.integers(5, 7))
     a = np.sort(rng.uniform(0.0, 2 * np.pi, k))
     r = radius * rng.uniform(0.6, 1.0, k)
-    pts = np.column_stack([x + r * np.cos(a), y + r * np.sin(a)])
-    return prism("rock", _convex(pts), -1.0, top)
+    return _convex(np.column_stack([x + r * np.cos(a), y + r * np.sin(a)]))
+
+
+def _rock(rng: np.random.Generator, x: float, y: float, radius: float, top: float) -> Solid:
+    """A boulder from below the water up to ``top`` [m]."""
+    return prism("rock", _blob(rng, x, y, radius), -1.0, top)
 
 
 def _bush(rng: np.random.Generator, x: float, y: float, radius: float, top: float) -> Solid:
@@ -115,8 +120,7 @@ def _bush(rng: np.random.Generator, x: float, y: float, radius: float, top: floa
     cylinders, half irregular convex prisms."""
     if rng.uniform() < 0.5:
         return cylinder("bush", x, y, radius, 0.0, top)
-    rock = _rock(rng, x, y, radius, top)
-    return prism("bush", rock.polygon, 0.0, top)
+    return prism("bush", _blob(rng, x, y, radius), 0.0, top)
 
 
 def _shore_clutter(
