@@ -69,7 +69,11 @@ def test_ntnu_round_geometry():
         (GOOD + "initial_state: [1, 2]\n", "initial_state", "6 numbers"),
         (GOOD + "seed: 1.5\n", "seed", "an integer"),
         (GOOD + "sensors: {lidar2d: {preset: velodyne}}\n", "sensors.lidar2d.preset", "one of"),
-        (GOOD + "sensors: {lidar3d: {preset: rplidar_a1}}\n", "sensors.lidar3d.preset", "a 3D lidar"),
+        (
+            GOOD + "sensors: {lidar3d: {preset: rplidar_a1}}\n",
+            "sensors.lidar3d.preset",
+            "a 3D lidar",
+        ),
         (GOOD + "sensors: {enabled: [sonar]}\n", "sensors.enabled[0]", "one of lidar2d"),
         (GOOD + "sensors: {gps: {datum: mars}}\n", "sensors.gps.datum", "one of"),
         (GOOD.replace("[[10.0, 0.0]]", "[[30.0, 7.5]]"), "mission.waypoints[0]", "free water"),
