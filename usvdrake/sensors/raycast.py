@@ -39,6 +39,7 @@ class Scene:
     edge_d: np.ndarray  # (N, K) offsets (padding: 1, always satisfied)
     cyl: np.ndarray  # (N, 3) circle (x, y, r) for cylinders
     cut: np.ndarray  # (N, 4) extra plane n·p ≤ d (padding: 0, 0, 0, 1)
+    corners: np.ndarray  # (N, K, 2) footprint corners (padding repeats the last; cylinders: centre)
     kind: np.ndarray  # (N,) str, the solids' kinds
 
     @classmethod
@@ -55,6 +56,7 @@ class Scene:
             edge_d=np.ones((n, k)),
             cyl=np.zeros((n, 3)),
             cut=np.tile([0.0, 0.0, 0.0, 1.0], (n, 1)),
+            corners=np.zeros((n, k, 2)),
             kind=np.array([s.kind for s in solids], dtype=object),
         )
         for i, s in enumerate(solids):
@@ -64,10 +66,13 @@ class Scene:
             if s.is_cylinder:
                 scene.is_cyl[i] = True
                 scene.cyl[i] = s.circle
+                scene.corners[i] = s.circle[:2]
             else:
                 normals, offsets = s.edge_planes()
                 scene.edge_n[i, : len(offsets)] = normals
                 scene.edge_d[i, : len(offsets)] = offsets
+                scene.corners[i, : len(s.polygon)] = s.polygon
+                scene.corners[i, len(s.polygon) :] = s.polygon[-1]
             if s.cut is not None:
                 scene.cut[i] = s.cut
         return scene
@@ -102,9 +107,9 @@ def _pairs(
     margin: float,
     slack: float,
 ):
-    """(solid, column) pairs whose solid's bounding circle, seen from ``origin``, covers the
-    column's direction. ``margin`` [m] grows the circles (sensor motion during a sweep),
-    ``slack`` [rad] widens the angular span (heading change during a sweep)."""
+    """(solid, column) pairs whose solid, seen from ``origin``, may cover the column's direction:
+    prisms by the bearings of their corners, cylinders by their circle. ``margin`` [m] is how far
+    the sensor moves during the sweep, ``slack`` [rad] how far its heading turns."""
     rel = scene.centre - origin
     dist = np.hypot(rel[:, 0], rel[:, 1])
     rad = scene.radius + margin
@@ -117,7 +122,28 @@ def _pairs(
     half = (
         np.where(inside, np.pi, np.arcsin(np.clip(rad / np.maximum(dist, 1e-12), 0.0, 1.0))) + slack
     )
-    centre_angle = np.arctan2(rel[:, 1], rel[:, 0]) - heading - layout.az0
+    centre_angle = np.arctan2(rel[:, 1], rel[:, 0])
+    # Prisms: the exact bearings of their corners bound what they cover (far tighter than the
+    # bounding circle for long walls), widened by what the sweep's motion can change.
+    prism = ~scene.is_cyl[cand]
+    if prism.any():
+        sp = cand[prism]
+        out_by = np.max(np.einsum("pkj,j->pk", scene.edge_n[sp], origin) - scene.edge_d[sp], axis=1)
+        outside = out_by > margin  # a lower bound of the distance to the footprint
+        if outside.any():
+            rc = scene.corners[sp[outside]] - origin
+            mid = centre_angle[prism][outside]
+            bearing = np.angle(np.exp(1j * (np.arctan2(rc[..., 1], rc[..., 0]) - mid[:, None])))
+            lo_b, hi_b = bearing.min(axis=1), bearing.max(axis=1)
+            widen = np.arcsin(np.clip(margin / out_by[outside], 0.0, 1.0))
+            idx = np.nonzero(prism)[0][outside]
+            centre_angle[idx] = mid + (lo_b + hi_b) / 2
+            half[idx] = (hi_b - lo_b) / 2 + widen + slack
+            inside[idx] = False
+        inside_prism = np.nonzero(prism)[0][~outside]
+        inside[inside_prism] = True
+        half[inside_prism] = np.pi
+    centre_angle = centre_angle - heading - layout.az0
     step = abs(layout.daz)
     sign = 1.0 if layout.daz > 0 else -1.0
     lo = np.mod(sign * centre_angle - half, TWO_PI)  # angular offset from column 0, beam-wise
@@ -183,13 +209,15 @@ def cast(
     water_level: float | None = 0.0,
     column_origin_xy: np.ndarray | None = None,
     column_heading: np.ndarray | None = None,
+    cull: bool = True,
 ) -> np.ndarray:
     """Ranges [m] along each beam, shape (rings, columns); ``inf`` where nothing is hit within
     [min_range, max_range] before the beam meets the water.
 
     ``origin_xy``, ``heading``: the sensor pose used for culling. To apply the sweep's own
     motion, pass each column's origin (``column_origin_xy``, C × 2) and heading
-    (``column_heading``, C); the culling is widened to cover them.
+    (``column_heading``, C); the culling is widened to cover them. ``cull=False`` tests every
+    solid against every column (a reference for tests).
     """
     tan_e = np.asarray(tan_elevation, float).reshape(-1)
     cos_e = 1.0 / np.sqrt(1.0 + tan_e**2)
@@ -202,7 +230,13 @@ def cast(
     if column_heading is not None:
         slack = float(np.max(np.abs(np.angle(np.exp(1j * (column_heading - heading))))))
     t_reach = max_range  # horizontal reach never exceeds the range
-    solid, col = _pairs(scene, origin_xy, heading, layout, t_reach, margin, slack + abs(layout.daz))
+    if cull:
+        solid, col = _pairs(
+            scene, origin_xy, heading, layout, t_reach, margin, slack + abs(layout.daz)
+        )
+    else:
+        solid = np.repeat(np.arange(len(scene)), layout.count)
+        col = np.tile(np.arange(layout.count), len(scene))
     if solid.size == 0:
         return out.reshape(rings, cols)
     az = layout.az0 + layout.daz * col
