@@ -9,6 +9,8 @@ import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from usvdrake.sensors.gps_model import GpsConfig
 from usvdrake.sensors.imu_model import ImuConfig
 from usvdrake.sensors.lidar_model import LIDAR_PRESETS, LidarConfig
@@ -263,17 +265,31 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
 
 
 def _check_free_water(s: Scenario, file, world) -> None:
-    """The start and every waypoint must lie in water, clear of quays, boats and buildings."""
+    """The start and every waypoint must lie in the water, clear of quays, boats and buildings,
+    and the straight legs between them must not cross a solid or land (LOS guidance follows
+    them)."""
     points = [("initial_state", s.initial_state[:2])]
     points += [(f"mission.waypoints[{i}]", wp) for i, wp in enumerate(s.mission.waypoints)]
     for key, (x, y) in points:
-        clearance = float(world.clearance(x, y))
-        if clearance <= 0.0:
+        if not (world.in_water(x, y) and world.clearance(x, y) > 0.0):
+            where = "inside an obstacle" if world.in_water(x, y) else "on land"
+            raise ConfigError(
+                file, key, f"a point in free water of world '{s.world}'", f"({x}, {y}), {where}"
+            )
+    for (key_a, a), (key_b, b) in zip(points[:-1], points[1:], strict=True):
+        a, b = np.asarray(a, float), np.asarray(b, float)
+        n = max(2, int(np.linalg.norm(b - a) / 0.25) + 1)
+        leg = a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)
+        blocked = ~world.in_water(leg[:, 0], leg[:, 1]) | (
+            world.clearance(leg[:, 0], leg[:, 1]) <= 0.0
+        )
+        if blocked.any():
+            x, y = np.round(leg[np.argmax(blocked)], 1)
             raise ConfigError(
                 file,
-                key,
-                f"a point in free water of world '{s.world}'",
-                f"({x}, {y}), inside an obstacle",
+                key_b,
+                f"a straight leg from {key_a} through free water",
+                f"one blocked at ({x}, {y})",
             )
 
 
