@@ -72,7 +72,7 @@ def build_vessel_diagram(
                     )
                     builder.Connect(station.GetOutputPort(port), hits.GetInputPort("lidar"))
         x0, y0 = scenario.initial_state[:2]
-        look_at(meshcat, [x0, y0, 0.0], distance=15.0 * vessel.hull.length)
+        look_at(meshcat, [x0, y0, 0.0], distance=max(20.0 * vessel.hull.length, 8.0))
         viz = builder.AddNamedSystem(
             "vessel_visualizer",
             VesselVisualizer(meshcat, vessel, scenario.visualization, scenario.mission.waypoints),
