@@ -38,6 +38,13 @@ def coriolis(xi: Hydrodynamics, nu) -> np.ndarray:
     )
 
 
+def coriolis_times_velocity(xi: Hydrodynamics, nu) -> np.ndarray:
+    """C(ν) ν of eq. (5) written out: [−m22 v r, m11 u r, (m22 − m11) u v]. Elementwise, so it
+    also works on batches (each of u, v, r an array)."""
+    u, v, r = nu[0], nu[1], nu[2]
+    return np.array([-xi.m22 * v * r, xi.m11 * u * r, (xi.m22 - xi.m11) * u * v])
+
+
 def current_in_body(psi, current_world) -> np.ndarray:
     """ν_c: the water velocity V_c = [Vx, Vy] (world) expressed in the body frame, zero yaw rate."""
     c, s = np.cos(psi), np.sin(psi)
@@ -46,15 +53,18 @@ def current_in_body(psi, current_world) -> np.ndarray:
 
 
 def vessel_derivatives(xi: Hydrodynamics, q, tau, tau_env, current_world) -> np.ndarray:
-    """q̇ = f(q, τ) of eq. (7) for q = [x y ψ u v r]: eqs. (1), (2) with (4)-(6)."""
+    """q̇ = f(q, τ) of eq. (7) for q = [x y ψ u v r]: eqs. (1), (2) with (4)-(6).
+
+    Scalars may be float, AutoDiffXd or Expression; a batch works too (q of shape (6, N),
+    τ (3, N), ...), which the discrete-time model of the controllers uses."""
     q = np.asarray(q)
     psi, nu = q[2], q[3:6]
     c, s = np.cos(psi), np.sin(psi)
-    u, v, r = nu
+    u, v, r = nu[0], nu[1], nu[2]
     eta_dot = [c * u - s * v, s * u + c * v, r]
-    nu_r = nu - current_in_body(psi, current_world)
-    drag = np.array([xi.Xu * nu_r[0], xi.Yv * nu_r[1], xi.Nr * nu_r[2]])
-    cor = coriolis(xi, nu) @ nu
+    nu_c = current_in_body(psi, current_world)
+    drag = [xi.Xu * (u - nu_c[0]), xi.Yv * (v - nu_c[1]), xi.Nr * r]
+    cor = coriolis_times_velocity(xi, nu)
     m = (xi.m11, xi.m22, xi.m33)
     nu_dot = [(tau[i] + tau_env[i] - cor[i] - drag[i]) / m[i] for i in range(3)]
     return np.array(eta_dot + nu_dot)
