@@ -88,4 +88,4 @@ def test_rollout_converges_to_the_continuous_plant():
     sim.AdvanceTo(60.0)
     traj = rollout(v.hydrodynamics, q0, np.tile(tau, (600, 1)), 0.1)
     assert np.max(np.abs(traj[-1] - ctx.get_continuous_state_vector().CopyToVector())) < 1e-5
-    assert np.linalg.norm(traj[-1, :2] - q0[:2]) > 10.0  # it went somewhere
+    assert np.linalg.norm(traj[-1, :2] - q0[:2]) > 5.0  # it went somewhere (it turns in circles)
