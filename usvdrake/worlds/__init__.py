@@ -5,7 +5,7 @@ from collections.abc import Callable
 import shapely
 
 from usvdrake.worlds.basin import ntnu_basin
-from usvdrake.worlds.canal import amsterdam_canals, canal_demo
+from usvdrake.worlds.canal import amsterdam_canals, canal_demo, charles_river
 from usvdrake.worlds.natural import phu_tho_lake, valley
 from usvdrake.worlds.solids import Solid, box, cylinder, prism
 from usvdrake.worlds.world import OccupancyGrid, World, hull_clearance
@@ -25,6 +25,7 @@ def open_water(seed: int = 0) -> World:
 WORLDS: dict[str, Callable[[int], World]] = {
     "amsterdam_canals": amsterdam_canals,
     "canal_demo": canal_demo,
+    "charles_river": charles_river,
     "ntnu_basin": ntnu_basin,
     "open_water": open_water,
     "phu_tho_lake": phu_tho_lake,

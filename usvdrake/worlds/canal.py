@@ -88,8 +88,10 @@ def canal_network(
     boats: int = 0,
     datum: str = "amsterdam",
     description: str = "",
+    facades: bool = True,
 ) -> World:
-    """A canal world. ``bridges``: [(canal index, arc length [m])]; ``boats``: how many moored."""
+    """A canal world. ``bridges``: [(canal index, arc length [m])]; ``boats``: how many moored;
+    ``facades``: line the streets with buildings (a river bank has none)."""
     rng = np.random.default_rng(seed)
     lines = [shapely.LineString(c.centre_line) for c in canals]
     water = shapely.union_all(
@@ -109,7 +111,7 @@ def canal_network(
     street = QUAY_THICKNESS + STREET_WIDTH
     keep_out = water.buffer(street - 0.05, join_style="mitre")
     candidates = []
-    for ring in _rings(water):
+    for ring in _rings(water) if facades else []:
         dense = _densify_ring(ring, 1.0)
         idx, k = [], 0
         while k < len(dense):
@@ -208,6 +210,22 @@ def _arc(radius: float, a0_deg: float, a1_deg: float, step: float = 10.0) -> lis
     n = max(2, int(np.ceil(np.deg2rad(abs(a1_deg - a0_deg)) * radius / step)) + 1)
     a = np.deg2rad(np.linspace(a0_deg, a1_deg, n))
     return np.column_stack([radius * np.cos(a), radius * np.sin(a)]).tolist()
+
+
+def charles_river(seed: int = 0) -> World:
+    """A reach like the Charles River basin where 000 §VI-B tested NMPC and NMHE: 200 m of open
+    water (the real basin is ~500 m wide), 900 m long with a gentle bend, walled banks, a few
+    moored boats and one long bridge (like the Harvard Bridge). Local origin mid-reach."""
+    return canal_network(
+        "charles_river",
+        [Canal([[-450.0, -60.0], [0.0, 0.0], [450.0, -60.0]], 200.0)],
+        seed,
+        bridges=[(0, 780.0)],
+        boats=6,
+        datum="charles_river",
+        description="A 200 m wide river reach with walled banks and a bridge",
+        facades=False,
+    )
 
 
 def _radial(angle_deg: float, r0: float, r1: float) -> list[list[float]]:

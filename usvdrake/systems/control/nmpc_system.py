@@ -1,0 +1,127 @@
+"""``Nmpc``: the NMPC of 000 §IV-B as a 10 Hz LeafSystem with zero-order hold."""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import BasicVector, LeafSystem
+
+from usvdrake.systems.control.nmpc_problem import NmpcConfig, NmpcProblem
+from usvdrake.vessel import VesselParams
+
+
+@dataclass
+class NmpcMemory:
+    """What the controller remembers between steps (abstract state in the Context)."""
+
+    warm: tuple | None = None  # the last plan shifted by one step: (q (N+1, 6), u (N, n_u))
+    predicted: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))  # last predicted states
+    solve_ms: list = field(default_factory=list)  # wall time of every solve [ms]
+    costs: list = field(default_factory=list)  # (10a) of every successful solve
+    failures: int = 0  # solves that failed in total
+    consecutive: int = 0  # failures in a row (→ zero thrust past the limit)
+
+
+class Nmpc(LeafSystem):
+    """Real-time-iteration NMPC (see ``nmpc_problem``) tracking a timed reference.
+
+    .. pydrake_system::
+
+        name: Nmpc
+        input_ports:
+        - state_estimate
+        output_ports:
+        - thruster_command
+        - predicted_trajectory
+        - nmpc_failures
+
+    Every dt seconds: sample the reference over the horizon, solve from the estimate with the
+    previous plan (shifted) as warm start, hold the first input. A failed solve never stops the
+    mission: the previous plan's next input is applied (the plan shifted again) and counted;
+    after ``max_consecutive_failures`` failures in a row the command is zero thrust until a solve
+    succeeds. ``reference`` is any object with ``sample(times) -> (q_ref (n, 6), ν̇_ref (n, 3))``.
+    """
+
+    def __init__(self, vessel: VesselParams, cfg: NmpcConfig, reference):
+        super().__init__()
+        self._problem = NmpcProblem(vessel, cfg)
+        self._cfg, self._reference = cfg, reference
+        n_u = self._problem.nu
+        self._est = self.DeclareVectorInputPort("state_estimate", 6)
+        self._u = self.DeclareDiscreteState(BasicVector(np.zeros(n_u)))
+        self._mem = self.DeclareAbstractState(AbstractValue.Make(NmpcMemory()))
+        self.DeclareInitializationUnrestrictedUpdateEvent(self._reset)
+        self.DeclarePeriodicUnrestrictedUpdateEvent(cfg.dt, 0.0, self._step)
+        self.DeclareStateOutputPort("thruster_command", self._u)
+        self.DeclareAbstractOutputPort(
+            "predicted_trajectory",
+            lambda: AbstractValue.Make(np.zeros((0, 6))),
+            self._calc_predicted,
+            prerequisites_of_calc={self.abstract_state_ticket(self._mem)},
+        )
+        self.DeclareVectorOutputPort(
+            "nmpc_failures",
+            1,
+            self._calc_failures,
+            prerequisites_of_calc={self.abstract_state_ticket(self._mem)},
+        )
+
+    @property
+    def problem(self) -> NmpcProblem:
+        return self._problem
+
+    @property
+    def reference(self):
+        return self._reference
+
+    def memory(self, context) -> NmpcMemory:
+        return context.get_abstract_state(self._mem).get_value()
+
+    def _reset(self, context, state):
+        state.get_mutable_abstract_state(self._mem).set_value(NmpcMemory())
+
+    def _step(self, context, state):
+        p = self._problem
+        old = context.get_abstract_state(self._mem).get_value()
+        mem = NmpcMemory(
+            old.warm,
+            old.predicted,
+            list(old.solve_ms),
+            list(old.costs),
+            old.failures,
+            old.consecutive,
+        )
+        times = context.get_time() + p.dt * np.arange(p.N + 1)
+        q_ref, nu_dot_ref = self._reference.sample(times)
+        u_ref = p.feedforward(q_ref, nu_dot_ref)
+        q_hat = self._est.Eval(context)
+        try:
+            sol = p.solve(q_hat, q_ref, u_ref, mem.warm)
+        except Exception:  # a numerical failure must never end the mission; it is counted
+            sol = None
+        if sol is not None and sol.success:
+            u_now = sol.u[0]
+            mem.warm = p.shift(sol.q, sol.u)
+            mem.predicted = sol.q
+            mem.solve_ms.append(sol.solve_ms)
+            mem.costs.append(sol.cost)
+            mem.consecutive = 0
+        else:
+            mem.failures += 1
+            mem.consecutive += 1
+            if sol is not None:
+                mem.solve_ms.append(sol.solve_ms)
+            if mem.warm is not None and mem.consecutive <= self._cfg.max_consecutive_failures:
+                u_now = mem.warm[1][0]  # the previous plan's input for this step
+                mem.warm = p.shift(*mem.warm)
+            else:
+                u_now = np.zeros(p.nu)
+                mem.warm = None
+        state.get_mutable_discrete_state(self._u).SetFromVector(u_now)
+        state.get_mutable_abstract_state(self._mem).set_value(mem)
+
+    def _calc_predicted(self, context, value):
+        value.set_value(self.memory(context).predicted)
+
+    def _calc_failures(self, context, output):
+        output.SetFromVector([self.memory(context).failures])
