@@ -15,12 +15,14 @@ from usvdrake.sensors.gps_model import GpsConfig
 from usvdrake.sensors.imu_model import ImuConfig
 from usvdrake.sensors.lidar_model import LIDAR_PRESETS, LidarConfig
 from usvdrake.sensors.thrust_sensor import ThrustSensorConfig
+from usvdrake.systems.control.nmpc_problem import NmpcConfig
 from usvdrake.typed_yaml import ConfigError, get_dotted, load_typed, resolve_yaml
 from usvdrake.vessel import VESSEL_DIR, available_vessels
 
 SCENARIO_DIR = Path(__file__).parent / "scenarios"
 DEFAULT_SCENARIO = "canal_demo"
 ESTIMATORS = ("oracle",)  # more arrive with the SLAM / NMHE issues
+CONTROLLERS = ("baseline", "nmpc")
 
 
 @dataclass
@@ -123,6 +125,10 @@ class Scenario:
     seed: int = 0  # seed of every random source (world, environment, later sensors)
     initial_state: list[float] = field(default_factory=lambda: [0.0] * 6)  # [x y ψ u v r]
     estimator: str = "oracle"  # "oracle": the autonomy reads ground truth (until SLAM lands)
+    # "baseline": LOS guidance + PD + thrust allocation over the waypoints; "nmpc": the NMPC of
+    # 000 tracking an A* reference through the waypoints (goals in sequence) at mission.speed
+    controller: str = "baseline"
+    nmpc: NmpcConfig = field(default_factory=NmpcConfig)
     sensors: SensorsConfig = field(default_factory=SensorsConfig)
     environment: EnvironmentConfig = field(default_factory=EnvironmentConfig)
     mission: MissionConfig = field(default_factory=MissionConfig)
@@ -134,6 +140,8 @@ class Scenario:
 # Scenario values that must be > 0, and >= 0 (dotted keys, checked by validate_scenario).
 POSITIVE_KEYS = (
     "duration",
+    "nmpc.horizon",
+    "nmpc.dt",
     "mission.acceptance_radius",
     "mission.slowdown_radius",
     "control.rate_hz",
@@ -190,6 +198,17 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
         raise ConfigError(
             file, "initial_state", "6 numbers [x y psi u v r]", f"{len(s.initial_state)} numbers"
         )
+    if s.controller not in CONTROLLERS:
+        raise ConfigError(
+            file, "controller", "one of " + ", ".join(CONTROLLERS), repr(s.controller)
+        )
+    if s.nmpc.solver not in ("clarabel", "osqp"):
+        raise ConfigError(file, "nmpc.solver", "'clarabel' or 'osqp'", repr(s.nmpc.solver))
+    if s.nmpc.mode not in ("rti", "nlp"):
+        raise ConfigError(file, "nmpc.mode", "'rti' or 'nlp'", repr(s.nmpc.mode))
+    for key, n in (("nmpc.Wq", 6), ("nmpc.WN", 6), ("nmpc.velocity_bounds", 3)):
+        if len(get_dotted(s, key)) != n:
+            raise ConfigError(file, key, f"{n} numbers", f"{len(get_dotted(s, key))} numbers")
     if s.estimator not in ESTIMATORS:
         raise ConfigError(file, "estimator", "one of " + ", ".join(ESTIMATORS), repr(s.estimator))
     if not s.mission.waypoints:

@@ -1,8 +1,9 @@
-"""The autonomy half: estimate → guidance → controller → thrust allocation.
+"""The autonomy half: estimate → guidance → controller → thruster commands.
 
-With ``estimator: oracle`` the estimate is the station's ``ground_truth_state`` passed through
-unchanged (the only place the autonomy may read ground truth); the SLAM and NMHE issues add
-estimators fed by the sensor ports instead.
+Estimators: ``oracle`` passes the station's ``ground_truth_state`` through (the only place the
+autonomy may read ground truth). Controllers: ``baseline`` (LOS guidance, PD heading/speed law,
+constrained thrust allocation) or ``nmpc`` (000's NMPC tracking an A* reference through the
+mission's goals, thruster forces straight out).
 """
 
 from pydrake.systems.framework import Diagram, DiagramBuilder
@@ -13,33 +14,66 @@ from usvdrake.systems.control.heading_speed_controller import HeadingSpeedContro
 from usvdrake.systems.guidance.los_guidance import LosGuidance
 from usvdrake.systems.vessel.thrust_allocation import ThrustAllocation
 from usvdrake.vessel import VesselParams
+from usvdrake.worlds.world import World
+
+DEFAULT_NMPC_SPEED = 0.6  # [m/s] 000 §VI-B tracks at u = 0.6 m/s, v = 0
 
 
-def make_autonomy(scenario: Scenario, vessel: VesselParams) -> Diagram:
+def make_reference(scenario: Scenario, world: World):
+    """The timed reference the NMPC tracks: A* through the mission's goals in sequence."""
+    from usvdrake.systems.guidance.reference_trajectory import ReferenceTrajectory
+
+    speed = scenario.mission.speed or DEFAULT_NMPC_SPEED
+    return ReferenceTrajectory.from_goals(
+        world, scenario.initial_state[:2], scenario.mission.waypoints, speed=speed
+    )
+
+
+def make_autonomy(scenario: Scenario, vessel: VesselParams, world: World) -> Diagram:
     builder = DiagramBuilder()
     if scenario.estimator != "oracle":
         raise ValueError(f"estimator {scenario.estimator!r} is not available yet")
     estimator = builder.AddNamedSystem("oracle_estimator", PassThrough(6))
     builder.ExportInput(estimator.get_input_port(), "ground_truth_state")
+    estimate = estimator.get_output_port()
 
-    guidance = builder.AddNamedSystem(
-        "los_guidance", LosGuidance(scenario.mission, scenario.control, vessel.cruise_speed)
-    )
-    controller = builder.AddNamedSystem(
-        "heading_speed_controller", HeadingSpeedController(vessel.hydrodynamics, scenario.control)
-    )
-    allocation = builder.AddNamedSystem("thrust_allocation", ThrustAllocation(vessel))
-    builder.Connect(estimator.get_output_port(), guidance.GetInputPort("state_estimate"))
-    builder.Connect(estimator.get_output_port(), controller.GetInputPort("state_estimate"))
-    builder.Connect(guidance.GetOutputPort("reference"), controller.GetInputPort("reference"))
-    builder.Connect(controller.GetOutputPort("tau_desired"), allocation.GetInputPort("tau_desired"))
+    if scenario.controller == "nmpc":
+        from usvdrake.systems.control.nmpc_system import Nmpc
+        from usvdrake.systems.guidance.reference_monitor import ReferenceMonitor
 
-    builder.ExportOutput(allocation.GetOutputPort("thruster_command"), "thruster_command")
-    builder.ExportOutput(guidance.GetOutputPort("mission_complete"), "mission_complete")
-    builder.ExportOutput(guidance.GetOutputPort("reference"), "reference")
-    builder.ExportOutput(controller.GetOutputPort("tau_desired"), "tau_desired")
-    builder.ExportOutput(allocation.GetOutputPort("tau_achieved"), "tau_achieved")
-    builder.ExportOutput(estimator.get_output_port(), "state_estimate")
+        reference = make_reference(scenario, world)
+        nmpc = builder.AddNamedSystem("nmpc", Nmpc(vessel, scenario.nmpc, reference))
+        monitor = builder.AddNamedSystem(
+            "reference_monitor", ReferenceMonitor(reference, scenario.mission.acceptance_radius)
+        )
+        builder.Connect(estimate, nmpc.GetInputPort("state_estimate"))
+        builder.Connect(estimate, monitor.GetInputPort("state_estimate"))
+        builder.ExportOutput(nmpc.GetOutputPort("thruster_command"), "thruster_command")
+        builder.ExportOutput(nmpc.GetOutputPort("predicted_trajectory"), "predicted_trajectory")
+        builder.ExportOutput(nmpc.GetOutputPort("nmpc_failures"), "nmpc_failures")
+        builder.ExportOutput(monitor.GetOutputPort("mission_complete"), "mission_complete")
+        builder.ExportOutput(monitor.GetOutputPort("reference"), "reference")
+    else:
+        guidance = builder.AddNamedSystem(
+            "los_guidance", LosGuidance(scenario.mission, scenario.control, vessel.cruise_speed)
+        )
+        controller = builder.AddNamedSystem(
+            "heading_speed_controller",
+            HeadingSpeedController(vessel.hydrodynamics, scenario.control),
+        )
+        allocation = builder.AddNamedSystem("thrust_allocation", ThrustAllocation(vessel))
+        builder.Connect(estimate, guidance.GetInputPort("state_estimate"))
+        builder.Connect(estimate, controller.GetInputPort("state_estimate"))
+        builder.Connect(guidance.GetOutputPort("reference"), controller.GetInputPort("reference"))
+        builder.Connect(
+            controller.GetOutputPort("tau_desired"), allocation.GetInputPort("tau_desired")
+        )
+        builder.ExportOutput(allocation.GetOutputPort("thruster_command"), "thruster_command")
+        builder.ExportOutput(guidance.GetOutputPort("mission_complete"), "mission_complete")
+        builder.ExportOutput(guidance.GetOutputPort("reference"), "reference")
+        builder.ExportOutput(controller.GetOutputPort("tau_desired"), "tau_desired")
+        builder.ExportOutput(allocation.GetOutputPort("tau_achieved"), "tau_achieved")
+    builder.ExportOutput(estimate, "state_estimate")
     autonomy = builder.Build()
     autonomy.set_name("autonomy")
     return autonomy

@@ -27,7 +27,7 @@ def build_vessel_diagram(
     world = make_world(scenario.world, scenario.seed)
     builder = DiagramBuilder()
     station = builder.AddNamedSystem("station", make_sim_station(scenario, vessel, world))
-    autonomy = builder.AddNamedSystem("autonomy", make_autonomy(scenario, vessel))
+    autonomy = builder.AddNamedSystem("autonomy", make_autonomy(scenario, vessel, world))
     builder.Connect(
         autonomy.GetOutputPort("thruster_command"), station.GetInputPort("thruster_command")
     )
@@ -39,15 +39,9 @@ def build_vessel_diagram(
     for i in range(station.num_output_ports()):
         name = station.get_output_port(i).get_name()
         builder.ExportOutput(station.get_output_port(i), name)
-    for name in (
-        "thruster_command",
-        "mission_complete",
-        "reference",
-        "tau_desired",
-        "tau_achieved",
-        "state_estimate",
-    ):
-        builder.ExportOutput(autonomy.GetOutputPort(name), name)
+    for i in range(autonomy.num_output_ports()):
+        name = autonomy.get_output_port(i).get_name()
+        builder.ExportOutput(autonomy.get_output_port(i), name)
 
     if meshcat is not None:
         from usvdrake.viz.lidar_visualizer import LidarVisualizer

@@ -1,0 +1,45 @@
+"""``ReferenceMonitor``: where the timed reference is now, how far the vessel is from it, and
+whether the mission is over (the reference has ended and the last goal is reached)."""
+
+import numpy as np
+from pydrake.systems.framework import LeafSystem
+
+from usvdrake.systems.guidance.line_of_sight import wrap_angle
+
+
+class ReferenceMonitor(LeafSystem):
+    """.. pydrake_system::
+
+        name: ReferenceMonitor
+        input_ports:
+        - state_estimate
+        output_ports:
+        - reference
+        - mission_complete
+
+    ``reference`` = [ψ_ref [rad], u_ref [m/s], e [m]] with e the distance from the estimate to
+    the reference position now (the same layout the LOS guidance logs); ``mission_complete`` =
+    [1] once the reference has ended and the estimate is within ``acceptance_radius`` [m] of its
+    final position.
+    """
+
+    def __init__(self, reference, acceptance_radius: float):
+        super().__init__()
+        self._ref, self._radius = reference, acceptance_radius
+        self._est = self.DeclareVectorInputPort("state_estimate", 6)
+        self.DeclareVectorOutputPort("reference", 3, self._calc_reference)
+        self.DeclareVectorOutputPort("mission_complete", 1, self._calc_complete)
+
+    def _calc_reference(self, context, output):
+        q_ref, _ = self._ref.sample(np.array([context.get_time()]))
+        q = self._est.Eval(context)
+        e = float(np.hypot(q[0] - q_ref[0, 0], q[1] - q_ref[0, 1]))
+        output.SetFromVector([wrap_angle(q_ref[0, 2]), q_ref[0, 3], e])
+
+    def _calc_complete(self, context, output):
+        done = False
+        if context.get_time() >= self._ref.duration:
+            q_end, _ = self._ref.sample(np.array([self._ref.duration]))
+            q = self._est.Eval(context)
+            done = np.hypot(q[0] - q_end[0, 0], q[1] - q_end[0, 1]) <= self._radius
+        output.SetFromVector([1.0 if done else 0.0])
