@@ -11,7 +11,7 @@ from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator, Simula
 from pydrake.systems.framework import DiagramBuilder, EventStatus
 from pydrake.systems.primitives import LogVectorOutput
 
-from usvdrake.analysis.metrics import mission_metrics
+from usvdrake.analysis.metrics import mission_metrics, tracking_metrics
 from usvdrake.diagrams.vessel_diagram import build_vessel_diagram
 from usvdrake.scenario import Scenario
 from usvdrake.vessel import load_vessel
@@ -166,6 +166,19 @@ def run_mission(
             times, states, reference, thrust, vessel, world, np.asarray(scenario.mission.waypoints)
         )
     )
+
+    autonomy = vessel_diagram.GetSubsystemByName("autonomy")
+    if autonomy.HasSubsystemNamed("nmpc"):
+        nmpc = autonomy.GetSubsystemByName("nmpc")
+        memory = nmpc.memory(nmpc.GetMyContextFromRoot(context))
+        solve_ms = np.asarray(memory.solve_ms) if memory.solve_ms else np.zeros(1)
+        metrics.update(tracking_metrics(times, states, nmpc.reference))
+        metrics.update(
+            nmpc_failures=int(memory.failures),
+            nmpc_solves=len(memory.solve_ms),
+            nmpc_solve_ms_median=float(np.median(solve_ms)),
+            nmpc_solve_ms_p95=float(np.percentile(solve_ms, 95)),
+        )
 
     result = MissionResult(metrics, times, states, reference, thrust)
     if out_dir is not None:
