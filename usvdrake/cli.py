@@ -1,4 +1,4 @@
-"""The ``usvdrake`` command: ``run`` a scenario, ``bench`` a benchmark."""
+"""The ``usvdrake`` command: ``run`` a scenario, ``bench`` a benchmark, ``identify`` ξ."""
 
 import argparse
 import runpy
@@ -80,6 +80,79 @@ def cmd_bench(args) -> int:
     return 0
 
 
+def _guess_factors(text: str) -> tuple[float, ...]:
+    try:
+        factors = tuple(float(x) for x in text.split(","))
+    except ValueError:
+        factors = ()
+    if len(factors) not in (1, 6) or not all(f > 0 for f in factors):
+        raise ConfigError(
+            "command line", "--initial-guess", "one or six positive factors, comma-separated", text
+        )
+    return factors * 6 if len(factors) == 1 else factors
+
+
+def cmd_identify(args) -> int:
+    """000 eq. (9) on a log folder: table to stdout, DIR/xi.json and DIR/fit.png."""
+    import json
+
+    import numpy as np
+
+    from usvdrake.systems.estimation import identification as ident
+    from usvdrake.systems.estimation.identification_data import fixed_thruster_matrix, read_log
+    from usvdrake.vessel import load_vessel
+
+    factors = (
+        ident.DEFAULT_GUESS_FACTORS
+        if args.initial_guess is None
+        else _guess_factors(args.initial_guess)
+    )
+    if args.substeps < 1:
+        raise ConfigError("command line", "--substeps", "an integer >= 1", args.substeps)
+    vessel = load_vessel(args.vessel) if args.vessel else None
+    log = read_log(args.data, vessel)
+    vessel = vessel or load_vessel(log.vessel)
+    guess = vessel.hydrodynamics.as_vector() * np.array(factors)
+    options = ident.IdentificationOptions(substeps=args.substeps)
+    result, data = ident.identify_log(log, fixed_thruster_matrix(vessel), guess, options)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    summary = {
+        "data": str(args.data),
+        "vessel": vessel.name,
+        **ident.result_dict(result, log.true_xi),
+    }
+    (out / "xi.json").write_text(json.dumps(summary, indent=2) + "\n")
+    ident.plot_fit(data, result, out / "fit.png", substeps=args.substeps, title=str(args.data))
+    print(f"usvdrake identify {args.data}: {len(log.trials)} trials, vessel {vessel.name}")
+    print(ident.format_summary(result, log.true_xi))
+    print(f"  xi.json    {out / 'xi.json'}\n  fit.png    {out / 'fit.png'}")
+    return 0 if result.success else 1
+
+
+def cmd_identify_data(args) -> int:
+    """A synthetic 000 §VI-B data set (true ξ from the vessel file) as a log folder."""
+    from usvdrake.systems.estimation.identification_data import (
+        ExcitationExperiment,
+        simulate_experiment,
+        write_log,
+    )
+    from usvdrake.vessel import load_vessel
+
+    experiment = ExcitationExperiment(trials=args.trials, duration_s=args.duration)
+    if experiment.trials < 1 or not experiment.duration_s >= 1.0:
+        raise ConfigError(
+            "command line",
+            "--trials/--duration",
+            ">= 1 trial of >= 1 s",
+            f"{args.trials} trials of {args.duration} s",
+        )
+    log = simulate_experiment(load_vessel(args.vessel), args.seed, experiment)
+    folder = write_log(log, args.out)
+    print(f"wrote {len(log.trials)} trials of ~{args.duration:g} s (seed {args.seed}) to {folder}")
+    return 0
+
+
 def make_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="usvdrake", description="Autonomous surface vessels as Drake diagrams."
@@ -117,6 +190,25 @@ def make_parser() -> argparse.ArgumentParser:
     b.add_argument("name")
     b.add_argument("args", nargs=argparse.REMAINDER)
     b.set_defaults(func=cmd_bench)
+    i = sub.add_parser("identify", help="fit ξ = [m11 m22 m33 Xu Yv Nr] to a log (000 eq. 9)")
+    i.add_argument("data", help="identification log folder (meta.json + trial_NN.csv)")
+    i.add_argument("--out", default="out/identify", help="output folder (default: out/identify)")
+    i.add_argument("--vessel", default=None, help="vessel name or YAML (default: the log's)")
+    i.add_argument(
+        "--initial-guess",
+        default=None,
+        help="start = factor(s) × the vessel file's ξ, one number or six comma-separated "
+        "(default: 0.6,1.4,1.5,0.65,1.4,0.6, each component 35-50 %% off)",
+    )
+    i.add_argument("--substeps", type=int, default=1, help="RK4 steps per sample interval")
+    i.set_defaults(func=cmd_identify)
+    d = sub.add_parser("identify-data", help="write a synthetic identification log (000 §VI-B)")
+    d.add_argument("out", help="output folder")
+    d.add_argument("--seed", type=int, default=0)
+    d.add_argument("--vessel", default="roboat2", help="vessel name or YAML (its ξ is the truth)")
+    d.add_argument("--trials", type=int, default=5)
+    d.add_argument("--duration", type=float, default=150.0, help="nominal trial length [s]")
+    d.set_defaults(func=cmd_identify_data)
     return p
 
 

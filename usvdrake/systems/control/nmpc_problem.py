@@ -54,6 +54,9 @@ class NmpcConfig:
     nlp_max_iterations: int = 30  # SQP iterations in "nlp" mode
     nlp_tolerance: float = 1e-6  # [-] stop when the step's infinity norm is below this
     max_consecutive_failures: int = 5  # then command zero thrust
+    # [-] offset-free MPC: gain of the disturbance estimate d̂ (a constant body-frame force the
+    # model adds to τ over the horizon, learned from the one-step prediction error); 0: off
+    disturbance_gain: float = 0.3
 
 
 @dataclass
@@ -146,8 +149,10 @@ class NmpcProblem:
         )
 
     # --- pieces ---------------------------------------------------------------------------------
-    def feedforward(self, q_ref: np.ndarray, nu_dot_ref: np.ndarray) -> np.ndarray:
-        """u_ref (N, n_u): B⁺ (M ν̇_ref + C(ν_ref) ν_ref + D ν_ref), clipped to the limits."""
+    def feedforward(
+        self, q_ref: np.ndarray, nu_dot_ref: np.ndarray, disturbance=None
+    ) -> np.ndarray:
+        """u_ref (N, n_u): B⁺ (M ν̇_ref + C(ν_ref) ν_ref + D ν_ref − d̂), clipped to the limits."""
         xi = self.xi
         nu = q_ref[: self.N, 3:].T
         tau = (
@@ -155,20 +160,38 @@ class NmpcProblem:
             + coriolis_times_velocity(xi, nu)
             + np.array([xi.Xu, xi.Yv, xi.Nr])[:, None] * nu
         )
+        if disturbance is not None:
+            tau = tau - np.asarray(disturbance, float)[:, None]
         return np.clip((self.B_pinv @ tau).T, self.u_min, self.u_max)
 
-    def initial_guess(self, q_hat: np.ndarray, u_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def update_disturbance(
+        self, d: np.ndarray, nu_measured: np.ndarray, nu_predicted: np.ndarray
+    ) -> np.ndarray:
+        """Offset-free MPC (Pannocchia & Rawlings 2003, here as a body-frame force): the one-step
+        velocity prediction error, times M / dt, is the force the model missed; d̂ moves towards
+        it by ``disturbance_gain`` (a first-order filter against measurement noise)."""
+        m = np.array([self.xi.m11, self.xi.m22, self.xi.m33])
+        missed = m * (np.asarray(nu_measured) - np.asarray(nu_predicted)) / self.dt
+        return np.asarray(d, float) + self.cfg.disturbance_gain * missed
+
+    def initial_guess(
+        self, q_hat: np.ndarray, u_ref: np.ndarray, disturbance=None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Cold start: roll the feed-forward out from q̂."""
+        d = np.zeros(3) if disturbance is None else np.asarray(disturbance, float)
         q = np.empty((self.N + 1, NX))
         q[0] = q_hat
         for k in range(self.N):
-            q[k + 1] = rk4(self.xi, q[k : k + 1], (self.B_thr @ u_ref[k])[None], self.dt)[0]
+            q[k + 1] = rk4(self.xi, q[k : k + 1], (self.B_thr @ u_ref[k] + d)[None], self.dt)[0]
         return q, u_ref.copy()
 
-    def shift(self, q: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def shift(
+        self, q: np.ndarray, u: np.ndarray, disturbance=None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Warm start for the next step: drop the first interval, repeat the last input."""
+        d = np.zeros(3) if disturbance is None else np.asarray(disturbance, float)
         u_next = np.vstack([u[1:], u[-1:]])
-        q_last = rk4(self.xi, q[-1:], (self.B_thr @ u[-1])[None], self.dt)
+        q_last = rk4(self.xi, q[-1:], (self.B_thr @ u[-1] + d)[None], self.dt)
         return np.vstack([q[1:], q_last]), u_next
 
     def cost(self, q: np.ndarray, u: np.ndarray, q_ref: np.ndarray, u_ref: np.ndarray) -> float:
@@ -179,8 +202,8 @@ class NmpcProblem:
             np.sum(self.Wq * e[:-1] ** 2) + np.sum(self.WN * e[-1] ** 2) + np.sum(self.Wu * du**2)
         )
 
-    def _qp_step(self, q_hat, q_ref, u_ref, q_bar, u_bar):
-        tau_bar = u_bar @ self.B_thr.T
+    def _qp_step(self, q_hat, q_ref, u_ref, q_bar, u_bar, d):
+        tau_bar = u_bar @ self.B_thr.T + d
         q_next, a, bt = rk4_with_jacobians(self.xi, q_bar[:-1], tau_bar, self.dt)
         b = bt @ self.B_thr
         c = q_next - np.einsum("kij,kj->ki", a, q_bar[:-1]) - np.einsum("kij,kj->ki", b, u_bar)
@@ -199,15 +222,15 @@ class NmpcProblem:
         return (result.GetSolution(self._q), result.GetSolution(self._u)), ""
 
     # --- the public solve ---------------------------------------------------------------------
-    def solve(
-        self, q_hat, q_ref, u_ref, warm: tuple[np.ndarray, np.ndarray] | None = None
-    ) -> NmpcSolution:
-        """One NMPC step from estimate q̂ with references q_ref (N + 1, 6), u_ref (N, n_u) and
-        a warm start (the previous solution, already shifted); returns the plan."""
+    def solve(self, q_hat, q_ref, u_ref, warm=None, disturbance=None) -> NmpcSolution:
+        """One NMPC step from estimate q̂ with references q_ref (N + 1, 6), u_ref (N, n_u), a
+        warm start (the previous solution, already shifted) and the disturbance estimate d̂
+        (body-frame force added to τ in the model); returns the plan."""
         t0 = time.perf_counter()
         q_hat = np.asarray(q_hat, float)
+        d = np.zeros(3) if disturbance is None else np.asarray(disturbance, float)
         q_ref = wrap_reference(np.asarray(q_ref, float), q_hat[HEADING])
-        q_bar, u_bar = warm if warm is not None else self.initial_guess(q_hat, u_ref)
+        q_bar, u_bar = warm if warm is not None else self.initial_guess(q_hat, u_ref, d)
         q_bar = q_bar.copy()
         q_bar[:, HEADING] += (
             2 * np.pi * np.round((q_hat[HEADING] - q_bar[0, HEADING]) / (2 * np.pi))
@@ -216,7 +239,7 @@ class NmpcProblem:
         max_it = 1 if self.cfg.mode == "rti" else self.cfg.nlp_max_iterations
         while iterations < max_it:
             iterations += 1
-            sol, status = self._qp_step(q_hat, q_ref, u_ref, q_bar, u_bar)
+            sol, status = self._qp_step(q_hat, q_ref, u_ref, q_bar, u_bar, d)
             if sol is None:
                 break
             step = max(np.max(np.abs(sol[0] - q_bar)), np.max(np.abs(sol[1] - u_bar)) / 50.0)

@@ -20,6 +20,9 @@ class NmpcMemory:
     costs: list = field(default_factory=list)  # (10a) of every successful solve
     failures: int = 0  # solves that failed in total
     consecutive: int = 0  # failures in a row (→ zero thrust past the limit)
+    disturbance: np.ndarray = field(
+        default_factory=lambda: np.zeros(3)
+    )  # d̂, body frame [N, N, N m]
 
 
 class Nmpc(LeafSystem):
@@ -90,18 +93,22 @@ class Nmpc(LeafSystem):
             list(old.costs),
             old.failures,
             old.consecutive,
+            old.disturbance,
         )
+        q_hat = self._est.Eval(context)
+        if self._cfg.disturbance_gain > 0 and mem.warm is not None:
+            # the previous plan predicted where we would be now: its shifted first state
+            mem.disturbance = p.update_disturbance(mem.disturbance, q_hat[3:], mem.warm[0][0, 3:])
         times = context.get_time() + p.dt * np.arange(p.N + 1)
         q_ref, nu_dot_ref = self._reference.sample(times)
-        u_ref = p.feedforward(q_ref, nu_dot_ref)
-        q_hat = self._est.Eval(context)
+        u_ref = p.feedforward(q_ref, nu_dot_ref, mem.disturbance)
         try:
-            sol = p.solve(q_hat, q_ref, u_ref, mem.warm)
+            sol = p.solve(q_hat, q_ref, u_ref, mem.warm, mem.disturbance)
         except Exception:  # a numerical failure must never end the mission; it is counted
             sol = None
         if sol is not None and sol.success:
             u_now = sol.u[0]
-            mem.warm = p.shift(sol.q, sol.u)
+            mem.warm = p.shift(sol.q, sol.u, mem.disturbance)
             mem.predicted = sol.q
             mem.solve_ms.append(sol.solve_ms)
             mem.costs.append(sol.cost)
@@ -113,7 +120,7 @@ class Nmpc(LeafSystem):
                 mem.solve_ms.append(sol.solve_ms)
             if mem.warm is not None and mem.consecutive <= self._cfg.max_consecutive_failures:
                 u_now = mem.warm[1][0]  # the previous plan's input for this step
-                mem.warm = p.shift(*mem.warm)
+                mem.warm = p.shift(*mem.warm, mem.disturbance)
             else:
                 u_now = np.zeros(p.nu)
                 mem.warm = None
