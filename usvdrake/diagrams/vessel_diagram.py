@@ -52,6 +52,17 @@ def build_vessel_diagram(
         draw_world(meshcat, world, show_gps_denied=viz_cfg.gps_denied)
         if viz_cfg.occupancy_resolution > 0:
             draw_occupancy(meshcat, world.occupancy(viz_cfg.occupancy_resolution))
+        if autonomy.HasOutputPort("predicted_trajectory"):
+            from usvdrake.viz.trajectory_visualizer import TrajectoryVisualizer, draw_reference
+
+            nmpc = autonomy.GetSubsystemByName("nmpc")
+            draw_reference(meshcat, nmpc.reference)
+            pred = builder.AddNamedSystem(
+                "prediction_visualizer", TrajectoryVisualizer(meshcat, "/nmpc/prediction")
+            )
+            builder.Connect(
+                autonomy.GetOutputPort("predicted_trajectory"), pred.GetInputPort("trajectory")
+            )
         if viz_cfg.lidar_hits:
             for port, name, cfg, three_d in (
                 ("lidar_scan", "lidar_2d", scenario.sensors.lidar2d, False),
