@@ -3,7 +3,8 @@
 Each source draws its k-th sample from ``numpy.random.default_rng([seed, stream, k])``: the
 same scenario seed gives the same numbers bit for bit, whatever else ran before and however
 often a diagram is re-simulated, and no generator has to live in the Context. Streams:
-environment 1-3, GPS 101-103, IMU 201-202, thrust 301, lidars 20 and 30.
+environment 1-3, lidars 20 and 30, GPS 101-103, IMU 201-202, thrust 301, identification data
+401-403, pose 501.
 """
 
 import numpy as np

@@ -14,14 +14,16 @@ import numpy as np
 from usvdrake.sensors.gps_model import GpsConfig
 from usvdrake.sensors.imu_model import ImuConfig
 from usvdrake.sensors.lidar_model import LIDAR_PRESETS, LidarConfig
+from usvdrake.sensors.pose_sensor import PoseSensorConfig
 from usvdrake.sensors.thrust_sensor import ThrustSensorConfig
 from usvdrake.systems.control.nmpc_problem import NmpcConfig
+from usvdrake.systems.estimation.nmhe_problem import NmheConfig
 from usvdrake.typed_yaml import ConfigError, get_dotted, load_typed, resolve_yaml
 from usvdrake.vessel import VESSEL_DIR, available_vessels
 
 SCENARIO_DIR = Path(__file__).parent / "scenarios"
 DEFAULT_SCENARIO = "canal_demo"
-ESTIMATORS = ("oracle",)  # more arrive with the SLAM / NMHE issues
+ESTIMATORS = ("oracle", "nmhe")  # SLAM estimators arrive with their issues
 CONTROLLERS = ("baseline", "nmpc")
 
 
@@ -98,12 +100,13 @@ class SimulationConfig:
     max_step: float = 0.1  # [s] largest integrator step
 
 
-SENSORS = ("lidar2d", "lidar3d", "imu", "gps")
+SENSORS = ("lidar2d", "lidar3d", "imu", "gps", "pose")
 
 
 @dataclass
 class SensorsConfig:
-    # Which sensors the station carries (exports as ports): any of lidar2d, lidar3d, imu, gps.
+    # Which sensors the station carries (exports as ports): any of lidar2d, lidar3d, imu, gps,
+    # pose (a noisy [x y ψ r] at 10 Hz standing in for 000's SLAM pose + gyro, for the NMHE).
     # thrust_measured and ground_truth_state are always there.
     enabled: list[str] = field(default_factory=list)
     lidar2d: LidarConfig = field(default_factory=lambda: LidarConfig(preset="rplidar_a1"))
@@ -113,6 +116,7 @@ class SensorsConfig:
     imu: ImuConfig = field(default_factory=ImuConfig)
     gps: GpsConfig = field(default_factory=GpsConfig)
     thrust: ThrustSensorConfig = field(default_factory=ThrustSensorConfig)
+    pose: PoseSensorConfig = field(default_factory=PoseSensorConfig)
 
 
 @dataclass
@@ -124,7 +128,10 @@ class Scenario:
     duration: float = 60.0  # [s] simulated time; the run ends earlier when the mission completes
     seed: int = 0  # seed of every random source (world, environment, later sensors)
     initial_state: list[float] = field(default_factory=lambda: [0.0] * 6)  # [x y ψ u v r]
-    estimator: str = "oracle"  # "oracle": the autonomy reads ground truth (until SLAM lands)
+    # "oracle": the autonomy reads ground truth; "nmhe": 000's NMHE on the pose sensor and the
+    # measured thrust (needs "pose" in sensors.enabled)
+    estimator: str = "oracle"
+    nmhe: NmheConfig = field(default_factory=NmheConfig)
     # "baseline": LOS guidance + PD + thrust allocation over the waypoints; "nmpc": the NMPC of
     # 000 tracking an A* reference through the waypoints (goals in sequence) at mission.speed
     controller: str = "baseline"
@@ -211,6 +218,13 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
             raise ConfigError(file, key, f"{n} numbers", f"{len(get_dotted(s, key))} numbers")
     if s.estimator not in ESTIMATORS:
         raise ConfigError(file, "estimator", "one of " + ", ".join(ESTIMATORS), repr(s.estimator))
+    if s.estimator == "nmhe" and "pose" not in s.sensors.enabled:
+        raise ConfigError(
+            file,
+            "sensors.enabled",
+            "'pose' in the list (the NMHE measures it)",
+            repr(s.sensors.enabled),
+        )
     if not s.mission.waypoints:
         raise ConfigError(file, "mission.waypoints", "at least one [x, y] waypoint", "none")
     for i, wp in enumerate(s.mission.waypoints):

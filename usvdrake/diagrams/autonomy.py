@@ -1,9 +1,10 @@
 """The autonomy half: estimate → guidance → controller → thruster commands.
 
 Estimators: ``oracle`` passes the station's ``ground_truth_state`` through (the only place the
-autonomy may read ground truth). Controllers: ``baseline`` (LOS guidance, PD heading/speed law,
-constrained thrust allocation) or ``nmpc`` (000's NMPC tracking an A* reference through the
-mission's goals, thruster forces straight out).
+autonomy may read ground truth); ``nmhe`` is 000's moving-horizon estimator on the station's
+``pose_measurement`` and ``thrust_measured``. Controllers: ``baseline`` (LOS guidance, PD
+heading/speed law, constrained thrust allocation) or ``nmpc`` (000's NMPC tracking an A*
+reference through the mission's goals, thruster forces straight out).
 """
 
 from pydrake.systems.framework import Diagram, DiagramBuilder
@@ -31,11 +32,21 @@ def make_reference(scenario: Scenario, world: World):
 
 def make_autonomy(scenario: Scenario, vessel: VesselParams, world: World) -> Diagram:
     builder = DiagramBuilder()
-    if scenario.estimator != "oracle":
-        raise ValueError(f"estimator {scenario.estimator!r} is not available yet")
-    estimator = builder.AddNamedSystem("oracle_estimator", PassThrough(6))
-    builder.ExportInput(estimator.get_input_port(), "ground_truth_state")
-    estimate = estimator.get_output_port()
+    if scenario.estimator == "nmhe":
+        from usvdrake.systems.estimation.nmhe_system import Nmhe
+
+        nmhe = builder.AddNamedSystem(
+            "nmhe", Nmhe(vessel, scenario.nmhe, initial_state=scenario.initial_state)
+        )
+        builder.ExportInput(nmhe.GetInputPort("pose_measurement"), "pose_measurement")
+        builder.ExportInput(nmhe.GetInputPort("thrust_measured"), "thrust_measured")
+        builder.ExportOutput(nmhe.GetOutputPort("nmhe_failures"), "nmhe_failures")
+        estimate = nmhe.GetOutputPort("state_estimate")
+        nmhe_force = nmhe.GetOutputPort("tau_env_estimate")
+    else:
+        estimator = builder.AddNamedSystem("oracle_estimator", PassThrough(6))
+        builder.ExportInput(estimator.get_input_port(), "ground_truth_state")
+        estimate = estimator.get_output_port()
 
     if scenario.controller == "nmpc":
         from usvdrake.systems.control.nmpc_system import Nmpc
@@ -47,6 +58,8 @@ def make_autonomy(scenario: Scenario, vessel: VesselParams, world: World) -> Dia
             "reference_monitor", ReferenceMonitor(reference, scenario.mission.acceptance_radius)
         )
         builder.Connect(estimate, nmpc.GetInputPort("state_estimate"))
+        if scenario.estimator == "nmhe":
+            builder.Connect(nmhe_force, nmpc.GetInputPort("disturbance_estimate"))
         builder.Connect(estimate, monitor.GetInputPort("state_estimate"))
         builder.ExportOutput(nmpc.GetOutputPort("thruster_command"), "thruster_command")
         builder.ExportOutput(nmpc.GetOutputPort("predicted_trajectory"), "predicted_trajectory")

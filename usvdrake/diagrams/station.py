@@ -14,6 +14,7 @@ from usvdrake.sensors.gps import Gps
 from usvdrake.sensors.imu import Imu
 from usvdrake.sensors.lidar2d import Lidar2D
 from usvdrake.sensors.lidar3d import Lidar3D
+from usvdrake.sensors.pose_sensor import PoseSensor
 from usvdrake.sensors.thrust_sensor import ThrustSensor, thrust_noise_scale
 from usvdrake.systems.vessel.environment import Environment
 from usvdrake.systems.vessel.thrust_mixer import ThrustMixer
@@ -81,6 +82,11 @@ def make_sim_station(scenario: Scenario, vessel: VesselParams, world: World) -> 
         )
         builder.Connect(state, gps.GetInputPort("state"))
         builder.ExportOutput(gps.GetOutputPort("gps"), "gps")
+
+    if "pose" in sensors.enabled:
+        pose = builder.AddNamedSystem("pose_sensor", PoseSensor(sensors.pose, scenario.seed))
+        builder.Connect(state, pose.GetInputPort("state"))
+        builder.ExportOutput(pose.GetOutputPort("pose_measurement"), "pose_measurement")
 
     builder.ExportInput(mixer.GetInputPort("thruster_command"), "thruster_command")
     builder.ExportOutput(mixer.GetOutputPort("thrust_applied"), "thrust_applied")

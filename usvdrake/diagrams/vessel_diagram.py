@@ -31,10 +31,14 @@ def build_vessel_diagram(
     builder.Connect(
         autonomy.GetOutputPort("thruster_command"), station.GetInputPort("thruster_command")
     )
-    if scenario.estimator == "oracle":
-        builder.Connect(
-            station.GetOutputPort("ground_truth_state"), autonomy.GetInputPort("ground_truth_state")
-        )
+    # The autonomy's inputs are station outputs of the same name (ports are the contract).
+    for i in range(autonomy.num_input_ports()):
+        name = autonomy.get_input_port(i).get_name()
+        if not station.HasOutputPort(name):
+            raise ValueError(
+                f"the autonomy needs station output {name!r}; enable its sensor in the scenario"
+            )
+        builder.Connect(station.GetOutputPort(name), autonomy.get_input_port(i))
 
     for i in range(station.num_output_ports()):
         name = station.get_output_port(i).get_name()

@@ -33,6 +33,7 @@ class Nmpc(LeafSystem):
         name: Nmpc
         input_ports:
         - state_estimate
+        - disturbance_estimate (optional)
         output_ports:
         - thruster_command
         - predicted_trajectory
@@ -43,6 +44,10 @@ class Nmpc(LeafSystem):
     mission: the previous plan's next input is applied (the plan shifted again) and counted;
     after ``max_consecutive_failures`` failures in a row the command is zero thrust until a solve
     succeeds. ``reference`` is any object with ``sample(times) -> (q_ref (n, 6), ν̇_ref (n, 3))``.
+
+    Offset-free: the model adds a constant body-frame force d̂ over the horizon — from
+    ``disturbance_estimate`` when connected (the NMHE's slow-force estimate), else learnt here
+    from the one-step prediction error (``NmpcConfig.disturbance_gain``).
     """
 
     def __init__(self, vessel: VesselParams, cfg: NmpcConfig, reference):
@@ -51,6 +56,8 @@ class Nmpc(LeafSystem):
         self._cfg, self._reference = cfg, reference
         n_u = self._problem.nu
         self._est = self.DeclareVectorInputPort("state_estimate", 6)
+        # optional: an estimator's body-frame force estimate (e.g. the NMHE's); replaces d̂
+        self._dist = self.DeclareVectorInputPort("disturbance_estimate", 3)
         self._u = self.DeclareDiscreteState(BasicVector(np.zeros(n_u)))
         self._mem = self.DeclareAbstractState(AbstractValue.Make(NmpcMemory()))
         self.DeclareInitializationUnrestrictedUpdateEvent(self._reset)
@@ -96,7 +103,9 @@ class Nmpc(LeafSystem):
             old.disturbance,
         )
         q_hat = self._est.Eval(context)
-        if self._cfg.disturbance_gain > 0 and mem.warm is not None:
+        if self._dist.HasValue(context):
+            mem.disturbance = np.array(self._dist.Eval(context), float)
+        elif self._cfg.disturbance_gain > 0 and mem.warm is not None:
             # the previous plan predicted where we would be now: its shifted first state
             mem.disturbance = p.update_disturbance(mem.disturbance, q_hat[3:], mem.warm[0][0, 3:])
         times = context.get_time() + p.dt * np.arange(p.N + 1)
