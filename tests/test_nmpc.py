@@ -111,3 +111,15 @@ def test_failures_shift_the_plan_then_stop_the_thrusters():
 def test_azimuth_vessels_are_refused_clearly():
     with pytest.raises(ValueError, match="azimuth"):
         NmpcProblem(load_vessel("ntnu_round"), NmpcConfig())
+
+
+def test_non_finite_inputs_fail_cleanly_instead_of_aborting():
+    """Drake aborts the process on NaN coefficients; the problem must refuse them first."""
+    p = NmpcProblem(VESSEL, NmpcConfig())
+    q_ref, nd = StraightLine().sample(p.dt * np.arange(p.N + 1))
+    u_ref = p.feedforward(q_ref, nd)
+    bad = p.solve(np.array([np.nan, 0, 0, 0, 0, 0]), q_ref, u_ref)
+    assert not bad.success and "non-finite" in bad.status
+    warm_q, warm_u = p.initial_guess(np.zeros(6), u_ref)
+    warm_q[5, 3] = np.inf
+    assert not p.solve(np.zeros(6), q_ref, u_ref, (warm_q, warm_u)).success

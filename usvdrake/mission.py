@@ -11,7 +11,7 @@ from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator, Simula
 from pydrake.systems.framework import DiagramBuilder, EventStatus
 from pydrake.systems.primitives import LogVectorOutput
 
-from usvdrake.analysis.metrics import mission_metrics, tracking_metrics
+from usvdrake.analysis.metrics import estimation_metrics, mission_metrics, tracking_metrics
 from usvdrake.diagrams.vessel_diagram import build_vessel_diagram
 from usvdrake.scenario import Scenario
 from usvdrake.vessel import load_vessel
@@ -79,9 +79,11 @@ def run_mission(
         "vessel", build_vessel_diagram(scenario, meshcat=meshcat)
     )
     period = 1.0 / scenario.visualization.rate_hz
+    logged = ["ground_truth_state", "reference", "thrust_applied", "state_estimate"]
+    logged += [p for p in ("pose_measurement", "nmhe_solve_ms") if vessel_diagram.HasOutputPort(p)]
     loggers = {
         name: LogVectorOutput(vessel_diagram.GetOutputPort(name), builder, period)
-        for name in ("ground_truth_state", "reference", "thrust_applied")
+        for name in logged
     }
     for name, logger in loggers.items():
         logger.set_name(f"log_{name}")
@@ -178,6 +180,20 @@ def run_mission(
             nmpc_solves=len(memory.solve_ms),
             nmpc_solve_ms_median=float(np.median(solve_ms)),
             nmpc_solve_ms_p95=float(np.percentile(solve_ms, 95)),
+        )
+
+    if autonomy.HasSubsystemNamed("nmhe"):
+        estimates = logs["state_estimate"].data().T
+        pose = logs["pose_measurement"].data().T if "pose_measurement" in logs else None
+        metrics.update(estimation_metrics(times, states, estimates, pose))
+        nmhe = autonomy.GetSubsystemByName("nmhe")
+        diag = nmhe.diagnostics(nmhe.GetMyContextFromRoot(context))
+        ms = logs["nmhe_solve_ms"].data().ravel()
+        ms = ms[ms > 0]
+        metrics.update(
+            nmhe_failures=diag["failures"],
+            nmhe_solve_ms_median=float(np.median(ms)) if len(ms) else 0.0,
+            nmhe_solve_ms_max=diag["max_ms"],
         )
 
     result = MissionResult(metrics, times, states, reference, thrust)

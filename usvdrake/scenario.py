@@ -211,6 +211,13 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
         )
     if s.nmpc.solver not in ("clarabel", "osqp"):
         raise ConfigError(file, "nmpc.solver", "'clarabel' or 'osqp'", repr(s.nmpc.solver))
+    if s.nmpc.disturbance_source not in ("estimator", "internal"):
+        raise ConfigError(
+            file,
+            "nmpc.disturbance_source",
+            "'estimator' or 'internal'",
+            repr(s.nmpc.disturbance_source),
+        )
     if s.nmpc.mode not in ("rti", "nlp"):
         raise ConfigError(file, "nmpc.mode", "'rti' or 'nlp'", repr(s.nmpc.mode))
     for key, n in (("nmpc.Wq", 6), ("nmpc.WN", 6), ("nmpc.velocity_bounds", 3)):

@@ -67,3 +67,33 @@ def tracking_metrics(times: np.ndarray, states: np.ndarray, reference) -> dict:
         "heading_rmse_rad": float(np.sqrt(np.mean(e_psi**2))),
         "reference_duration_s": float(reference.duration),
     }
+
+
+def estimation_metrics(
+    times: np.ndarray, states: np.ndarray, estimates: np.ndarray, pose=None
+) -> dict:
+    """How well the estimator knows the state (000 §VI-B: NMHE velocities). With ``pose``
+    (logged [x y ψ r] measurements) also the body-frame velocity from differentiating the
+    measured positions, the baseline an estimator must beat. Samples from 1 s on."""
+    keep = times >= 1.0
+    err = estimates[keep] - states[keep]
+    out = {
+        "estimate_position_rmse_m": float(np.sqrt(np.mean(err[:, 0] ** 2 + err[:, 1] ** 2))),
+        "estimate_heading_rmse_rad": float(np.sqrt(np.mean(np.angle(np.exp(1j * err[:, 2])) ** 2))),
+        "nmhe_velocity_rmse_u_mps": float(np.sqrt(np.mean(err[:, 3] ** 2))),
+        "nmhe_velocity_rmse_v_mps": float(np.sqrt(np.mean(err[:, 4] ** 2))),
+        "nmhe_yaw_rate_rmse_radps": float(np.sqrt(np.mean(err[:, 5] ** 2))),
+    }
+    out["nmhe_velocity_rmse_mps"] = max(
+        out["nmhe_velocity_rmse_u_mps"], out["nmhe_velocity_rmse_v_mps"]
+    )
+    if pose is not None and len(pose) > 2:
+        dt = np.diff(times)
+        vw = np.diff(pose[:, :2], axis=0) / dt[:, None]
+        psi = pose[1:, 2]
+        u_fd = np.cos(psi) * vw[:, 0] + np.sin(psi) * vw[:, 1]
+        v_fd = -np.sin(psi) * vw[:, 0] + np.cos(psi) * vw[:, 1]
+        k = keep[1:]
+        out["fd_velocity_rmse_u_mps"] = float(np.sqrt(np.mean((u_fd[k] - states[1:, 3][k]) ** 2)))
+        out["fd_velocity_rmse_v_mps"] = float(np.sqrt(np.mean((v_fd[k] - states[1:, 4][k]) ** 2)))
+    return out

@@ -41,6 +41,7 @@ def make_autonomy(scenario: Scenario, vessel: VesselParams, world: World) -> Dia
         builder.ExportInput(nmhe.GetInputPort("pose_measurement"), "pose_measurement")
         builder.ExportInput(nmhe.GetInputPort("thrust_measured"), "thrust_measured")
         builder.ExportOutput(nmhe.GetOutputPort("nmhe_failures"), "nmhe_failures")
+        builder.ExportOutput(nmhe.GetOutputPort("nmhe_solve_ms"), "nmhe_solve_ms")
         estimate = nmhe.GetOutputPort("state_estimate")
         nmhe_force = nmhe.GetOutputPort("tau_env_estimate")
     else:
@@ -58,7 +59,7 @@ def make_autonomy(scenario: Scenario, vessel: VesselParams, world: World) -> Dia
             "reference_monitor", ReferenceMonitor(reference, scenario.mission.acceptance_radius)
         )
         builder.Connect(estimate, nmpc.GetInputPort("state_estimate"))
-        if scenario.estimator == "nmhe":
+        if scenario.estimator == "nmhe" and scenario.nmpc.disturbance_source == "estimator":
             builder.Connect(nmhe_force, nmpc.GetInputPort("disturbance_estimate"))
         builder.Connect(estimate, monitor.GetInputPort("state_estimate"))
         builder.ExportOutput(nmpc.GetOutputPort("thruster_command"), "thruster_command")

@@ -57,6 +57,9 @@ class NmpcConfig:
     # [-] offset-free MPC: gain of the disturbance estimate d̂ (a constant body-frame force the
     # model adds to τ over the horizon, learned from the one-step prediction error); 0: off
     disturbance_gain: float = 0.3
+    # "estimator": take d̂ from the estimator's force estimate when one is wired (the NMHE's);
+    # "internal": always learn it here from the one-step prediction error
+    disturbance_source: str = "internal"
 
 
 @dataclass
@@ -207,6 +210,14 @@ class NmpcProblem:
         q_next, a, bt = rk4_with_jacobians(self.xi, q_bar[:-1], tau_bar, self.dt)
         b = bt @ self.B_thr
         c = q_next - np.einsum("kij,kj->ki", a, q_bar[:-1]) - np.einsum("kij,kj->ki", b, u_bar)
+        # Drake aborts (not raises) on non-finite coefficients: refuse them here instead.
+        if not (
+            np.isfinite(a).all()
+            and np.isfinite(b).all()
+            and np.isfinite(c).all()
+            and np.isfinite(q_ref).all()
+        ):
+            return None, "non-finite linearisation"
         self._eq.evaluator().UpdateCoefficients(
             self._eq_matrix(a, b), np.concatenate([q_hat, c.ravel()])
         )
@@ -229,6 +240,17 @@ class NmpcProblem:
         t0 = time.perf_counter()
         q_hat = np.asarray(q_hat, float)
         d = np.zeros(3) if disturbance is None else np.asarray(disturbance, float)
+        if not (np.isfinite(q_hat).all() and np.isfinite(d).all() and np.isfinite(u_ref).all()):
+            ms = (time.perf_counter() - t0) * 1e3
+            return NmpcSolution(
+                False,
+                np.zeros((self.N, self.nu)),
+                np.zeros((self.N + 1, NX)),
+                np.inf,
+                ms,
+                0,
+                "non-finite input",
+            )
         q_ref = wrap_reference(np.asarray(q_ref, float), q_hat[HEADING])
         q_bar, u_bar = warm if warm is not None else self.initial_guess(q_hat, u_ref, d)
         q_bar = q_bar.copy()

@@ -108,6 +108,8 @@ class Nmpc(LeafSystem):
         elif self._cfg.disturbance_gain > 0 and mem.warm is not None:
             # the previous plan predicted where we would be now: its shifted first state
             mem.disturbance = p.update_disturbance(mem.disturbance, q_hat[3:], mem.warm[0][0, 3:])
+            if not np.isfinite(mem.disturbance).all():
+                mem.disturbance = np.zeros(3)
         times = context.get_time() + p.dt * np.arange(p.N + 1)
         q_ref, nu_dot_ref = self._reference.sample(times)
         u_ref = p.feedforward(q_ref, nu_dot_ref, mem.disturbance)
