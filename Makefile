@@ -28,7 +28,8 @@ test: lint
 	USVDRAKE_QUICK=1 $(BIN)/python -m pytest -q tests --nbmake notebooks
 
 bench: $(STAMP)
-	$(BIN)/usvdrake bench demo_speed
+	$(BIN)/python -m pip install --quiet -e ".[bench]"
+	for b in demo_speed raycast nmpc identification; do $(BIN)/usvdrake bench $$b; done
 
 clean:
 	rm -rf $(VENV) out .pytest_cache
