@@ -59,7 +59,7 @@ def test_vessel_diagram_structure_reads_like_the_picture():
 
 
 def test_hardware_station_not_yet_available():
-    with pytest.raises(NotImplementedError, match="hardware"):
+    with pytest.raises(ValueError, match="hardware"):
         build_vessel_diagram(load_scenario("canal_demo"), hardware={"port": "/dev/null"})
 
 

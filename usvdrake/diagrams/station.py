@@ -47,46 +47,13 @@ def make_sim_station(scenario: Scenario, vessel: VesselParams, world: World) -> 
     )
     builder.Connect(mixer.GetOutputPort("thrust_applied"), thrust.GetInputPort("thrust_applied"))
     builder.ExportOutput(thrust.GetOutputPort("thrust_measured"), "thrust_measured")
-    if "lidar2d" in sensors.enabled:
-        lidar = builder.AddNamedSystem(
-            "lidar_2d", Lidar2D(sensors.lidar2d, world.scene, scenario.seed)
-        )
-        builder.Connect(state, lidar.GetInputPort("state"))
-        builder.ExportOutput(lidar.GetOutputPort("lidar_scan"), "lidar_scan")
-    if "lidar3d" in sensors.enabled:
-        lidar = builder.AddNamedSystem(
-            "lidar_3d", Lidar3D(sensors.lidar3d, world.scene, scenario.seed)
-        )
-        builder.Connect(state, lidar.GetInputPort("state"))
-        builder.ExportOutput(lidar.GetOutputPort("lidar_points"), "lidar_points")
-    if "imu" in sensors.enabled:
-        imu = builder.AddNamedSystem("imu", Imu(sensors.imu, scenario.seed))
-        builder.Connect(state, imu.GetInputPort("state"))
-        builder.Connect(plant.GetOutputPort("acceleration"), imu.GetInputPort("acceleration"))
-        builder.ExportOutput(imu.GetOutputPort("imu"), "imu")
-    if "gps" in sensors.enabled:
-        antenna = sensors.gps.antenna_height
-        gps_cfg = (
-            sensors.gps
-            if sensors.gps.datum
-            else dataclasses.replace(sensors.gps, datum=world.datum)
-        )
-        gps = builder.AddNamedSystem(
-            "gps",
-            Gps(
-                gps_cfg,
-                scenario.seed,
-                denied=lambda x, y: bool(world.gps_denied_at(x, y)),
-                sky_blocked=lambda x, y: world.sky_blocked(x, y, antenna),
-            ),
-        )
-        builder.Connect(state, gps.GetInputPort("state"))
-        builder.ExportOutput(gps.GetOutputPort("gps"), "gps")
-
-    if "pose" in sensors.enabled:
-        pose = builder.AddNamedSystem("pose_sensor", PoseSensor(sensors.pose, scenario.seed))
-        builder.Connect(state, pose.GetInputPort("state"))
-        builder.ExportOutput(pose.GetOutputPort("pose_measurement"), "pose_measurement")
+    for name in sensors.enabled:
+        system, port = _make_sensor(name, scenario, world)
+        add_state_sensor(builder, system, state, port)
+        if name == "imu":
+            builder.Connect(
+                plant.GetOutputPort("acceleration"), system.GetInputPort("acceleration")
+            )
 
     builder.ExportInput(mixer.GetInputPort("thruster_command"), "thruster_command")
     builder.ExportOutput(mixer.GetOutputPort("thrust_applied"), "thrust_applied")
@@ -94,3 +61,48 @@ def make_sim_station(scenario: Scenario, vessel: VesselParams, world: World) -> 
     station = builder.Build()
     station.set_name("station")
     return station
+
+
+def _make_sensor(name: str, scenario: Scenario, world: World):
+    """(system, output port name) of an enabled sensor, named as the station shows it."""
+    sensors, seed = scenario.sensors, scenario.seed
+    if name == "lidar2d":
+        return Lidar2D(sensors.lidar2d, world.scene, seed), "lidar_scan"
+    if name == "lidar3d":
+        return Lidar3D(sensors.lidar3d, world.scene, seed), "lidar_points"
+    if name == "imu":
+        return Imu(sensors.imu, seed), "imu"
+    if name == "pose":
+        return PoseSensor(sensors.pose, seed), "pose_measurement"
+    if name == "gps":
+        cfg = (
+            sensors.gps
+            if sensors.gps.datum
+            else dataclasses.replace(sensors.gps, datum=world.datum)
+        )
+        antenna = cfg.antenna_height
+        gps = Gps(
+            cfg,
+            seed,
+            denied=lambda x, y: bool(world.gps_denied_at(x, y)),
+            sky_blocked=lambda x, y: world.sky_blocked(x, y, antenna),
+        )
+        return gps, "gps"
+    raise ValueError(f"station: unknown sensor {name!r}")
+
+
+SYSTEM_NAMES = {
+    "lidar_scan": "lidar_2d",
+    "lidar_points": "lidar_3d",
+    "imu": "imu",
+    "gps": "gps",
+    "pose_measurement": "pose_sensor",
+}
+
+
+def add_state_sensor(builder: DiagramBuilder, system, state_port, port: str):
+    """Add a sensor that reads the vessel's ``state``, and export its output ``port``."""
+    builder.AddNamedSystem(SYSTEM_NAMES.get(port, port), system)
+    builder.Connect(state_port, system.GetInputPort("state"))
+    builder.ExportOutput(system.GetOutputPort(port), port)
+    return system

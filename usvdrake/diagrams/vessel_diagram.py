@@ -22,7 +22,7 @@ def build_vessel_diagram(
     hardware-I/O issue: the station is then built from serial/UDP systems with the same ports.
     """
     if hardware is not None:
-        raise NotImplementedError("the hardware station arrives with the hardware-I/O issue")
+        raise ValueError("hardware stations are not available in this version (simulation only)")
     vessel = load_vessel(scenario.vessel)
     world = make_world(scenario.world, scenario.seed)
     builder = DiagramBuilder()

@@ -27,7 +27,16 @@ class Lidar2D(SampledLidar):
     """
 
     def __init__(self, cfg: LidarConfig, scene: Scene, seed: int, stream: int = STREAM_LIDAR2D):
-        super().__init__(cfg, scene, seed, stream, three_d=False, port_name="lidar_scan")
+        super().__init__(
+            cfg,
+            scene,
+            seed,
+            stream,
+            three_d=False,
+            port_name="lidar_scan",
+            empty_message=type(self).empty_message,
+            make_message=type(self).make_message,
+        )
 
     def empty_message(self) -> LaserScan:
         m = self._model

@@ -36,7 +36,16 @@ class Lidar3D(SampledLidar):
     """
 
     def __init__(self, cfg: LidarConfig, scene: Scene, seed: int, stream: int = STREAM_LIDAR3D):
-        super().__init__(cfg, scene, seed, stream, three_d=True, port_name="lidar_points")
+        super().__init__(
+            cfg,
+            scene,
+            seed,
+            stream,
+            three_d=True,
+            port_name="lidar_points",
+            empty_message=type(self).empty_message,
+            make_message=type(self).make_message,
+        )
 
     def empty_message(self) -> PointCloud:
         m = self._model
