@@ -1,0 +1,162 @@
+"""Log-odds occupancy grid: a box room, exact insert/remove, Bresenham against the textbook loop."""
+
+import numpy as np
+import pytest
+
+from usvdrake.sensors.messages import LaserScan
+from usvdrake.systems.slam.occupancy_mapping import LogOddsGrid, bresenham_cells
+from usvdrake.worlds.world import OccupancyGrid
+
+RES = 0.05
+
+
+def reference_bresenham(x0: int, y0: int, x1: int, y1: int) -> list[tuple[int, int]]:
+    """The textbook all-octant integer Bresenham loop (error term, no floats)."""
+    dx, sx = abs(x1 - x0), 1 if x0 < x1 else -1
+    dy, sy = -abs(y1 - y0), 1 if y0 < y1 else -1
+    err, cells = dx + dy, []
+    while True:
+        cells.append((x0, y0))
+        if x0 == x1 and y0 == y1:
+            return cells
+        e2 = 2 * err
+        if e2 >= dy:
+            err += dy
+            x0 += sx
+        if e2 <= dx:
+            err += dx
+            y0 += sy
+
+
+def test_bresenham_cells_equal_reference():
+    rng = np.random.default_rng(3)
+    c0, r0 = 7, -4
+    c1, r1 = rng.integers(-300, 300, 500), rng.integers(-300, 300, 500)
+    c1[:4], r1[:4] = [c0, c0 + 5, c0, c0 - 9], [r0, r0, r0 - 6, r0 + 9]  # point, axes, diagonal
+    ray, col, row = bresenham_cells(c0, r0, c1, r1)
+    for k in range(len(c1)):
+        ours = list(zip(col[ray == k].tolist(), row[ray == k].tolist(), strict=True))
+        assert ours == reference_bresenham(c0, r0, int(c1[k]), int(r1[k])), k
+
+
+def test_scan_cells_equal_reference_rays():
+    """The vectorised scan update touches exactly the reference Bresenham cells."""
+    rng = np.random.default_rng(4)
+    grid = LogOddsGrid((-20.0, -20.0), RES, (800, 800))
+    pose = (0.37, -1.21, 0.4)
+    angles = np.linspace(-np.pi, np.pi, 300, endpoint=False)
+    ranges = rng.uniform(0.01, 14.0, angles.size)
+    ranges[::7] = np.inf  # no return
+    max_range = 12.0
+    grid.insert_scan(pose, ranges, angles, max_range)
+
+    c0, r0 = int(np.floor((pose[0] + 20) / RES)), int(np.floor((pose[1] + 20) / RES))
+    free, occ = set(), set()
+    for r, a in zip(ranges, angles, strict=True):
+        hit = r < max_range
+        d = r if hit else max_range
+        c1 = int(np.floor((pose[0] + d * np.cos(pose[2] + a) + 20) / RES))
+        r1 = int(np.floor((pose[1] + d * np.sin(pose[2] + a) + 20) / RES))
+        cells = reference_bresenham(c0, r0, c1, r1)
+        if hit:
+            occ.add(cells[-1])
+            cells = cells[:-1]
+        free.update(cells)
+    free -= occ
+    lo = grid.log_odds
+    assert {(c, r) for r, c in zip(*np.nonzero(lo > 0), strict=True)} == occ
+    assert {(c, r) for r, c in zip(*np.nonzero(lo < 0), strict=True)} == free
+    assert np.all(lo[lo > 0] == pytest.approx(grid.l_occ))
+    assert np.all(lo[lo < 0] == pytest.approx(grid.l_free))
+
+
+def _box_room_scan(pose, xlo, xhi, ylo, yhi, n):
+    """Exact ranges from inside an axis-aligned room [m]."""
+    angles = np.linspace(-np.pi, np.pi, n, endpoint=False)
+    d = np.stack([np.cos(pose[2] + angles), np.sin(pose[2] + angles)])
+    with np.errstate(divide="ignore"):
+        tx = np.where(d[0] > 0, (xhi - pose[0]) / d[0], (xlo - pose[0]) / d[0])
+        ty = np.where(d[1] > 0, (yhi - pose[1]) / d[1], (ylo - pose[1]) / d[1])
+    return np.minimum(np.abs(tx), np.abs(ty)), angles
+
+
+def test_box_room_walls_occupied_inside_free():
+    # Walls through cell centres, so float rounding of the end points cannot pick a neighbour.
+    grid = LogOddsGrid((-1.0, -1.0), RES, (220, 260))
+    xlo, xhi, ylo, yhi = 0.025, 10.025, 0.025, 8.025
+    pose = (3.0, 2.5, 0.3)
+    ranges, angles = _box_room_scan(pose, xlo, xhi, ylo, yhi, 2000)
+    grid.insert_scan(pose, ranges, angles, max_range=30.0)
+    out = grid.to_occupancy_grid()
+    assert isinstance(out, OccupancyGrid) and out.data.dtype == np.int8
+    assert out.origin == (-1.0, -1.0) and out.resolution == RES
+    r_lo, c_lo = (int(v) for v in out.to_cell(xlo, ylo))
+    r_hi, c_hi = (int(v) for v in out.to_cell(xhi, yhi))
+    data = out.data
+    inside = data[r_lo + 1 : r_hi, c_lo + 1 : c_hi]
+    assert np.all(inside == OccupancyGrid.FREE)
+    walls = np.concatenate(
+        [
+            data[r_lo, c_lo : c_hi + 1],
+            data[r_hi, c_lo : c_hi + 1],
+            data[r_lo : r_hi + 1, c_lo],
+            data[r_lo : r_hi + 1, c_hi],
+        ]
+    )
+    assert np.mean(walls == OccupancyGrid.OCCUPIED) > 0.9
+    ring = np.zeros(data.shape, bool)
+    ring[r_lo : r_hi + 1, c_lo : c_hi + 1] = True
+    ring[r_lo + 1 : r_hi, c_lo + 1 : c_hi] = False
+    assert np.all(data[~ring] != OccupancyGrid.OCCUPIED)  # nothing occupied off the walls
+    outside = np.ones(data.shape, bool)
+    outside[r_lo : r_hi + 1, c_lo : c_hi + 1] = False
+    assert np.all(data[outside] == OccupancyGrid.UNKNOWN)
+
+
+def test_no_return_rays_clear_but_mark_nothing():
+    grid = LogOddsGrid((-10.0, -10.0), RES, (400, 400))
+    angles = np.linspace(-np.pi / 2, np.pi / 2, 181)
+    grid.insert_scan((0.0, 0.0, 0.0), np.full(181, np.inf), angles, max_range=5.0)
+    assert not np.any(grid.log_odds > 0)
+    out = grid.to_occupancy_grid()
+    free = out.data == OccupancyGrid.FREE
+    # A point 4.9 m straight ahead is cleared, one 5.2 m ahead is not.
+    r, c = out.to_cell([4.9, 5.2], [0.01, 0.01])
+    assert free[r[0], c[0]] and not free[r[1], c[1]]
+
+
+def test_insert_then_remove_restores_zeros_exactly():
+    rng = np.random.default_rng(5)
+    grid = LogOddsGrid((-15.0, -15.0), RES, (500, 600))
+    angles = np.linspace(-3 * np.pi / 4, 3 * np.pi / 4, 1081)
+    scans = []
+    for _ in range(5):
+        ranges = rng.uniform(0.2, 35.0, angles.size)  # some beyond max_range, some off the grid
+        ranges[rng.random(angles.size) < 0.1] = np.inf
+        pose = (rng.uniform(-5, 5), rng.uniform(-5, 5), rng.uniform(-np.pi, np.pi))
+        scans.append((pose, ranges))
+        grid.insert_scan(pose, ranges, angles, 30.0)
+    only_last = LogOddsGrid((-15.0, -15.0), RES, (500, 600))
+    only_last.insert_scan(*scans[-1], angles, 30.0)
+    for pose, ranges in scans[-2::-1]:
+        grid.remove_scan(pose, ranges, angles, 30.0)
+    np.testing.assert_array_equal(grid.log_odds, only_last.log_odds)
+    grid.remove_scan(*scans[-1], angles, 30.0)
+    assert np.all(grid.log_odds == 0.0) and not np.any(grid.observed)
+    assert np.all(grid.to_occupancy_grid().data == OccupancyGrid.UNKNOWN)
+
+
+def test_sensor_off_grid_and_laser_scan_message():
+    grid = LogOddsGrid((0.0, 0.0), RES, (100, 100))
+    scan = LaserScan(
+        angle_min=-0.3,
+        angle_increment=0.01,
+        range_max=8.0,
+        ranges=np.full(61, 4.0),
+        valid=np.ones(61, bool),
+    )
+    grid.insert_laser_scan((-1.0, 2.5, 0.0), scan)  # starts 1 m left of the grid
+    assert np.any(grid.log_odds > 0) and np.any(grid.log_odds < 0)
+    grid.insert_laser_scan((-50.0, -50.0, 0.0), scan)  # never reaches the grid: no-op
+    with pytest.raises(ValueError):
+        LogOddsGrid((0.0, 0.0), RES, (10, 10), l_occ=-1.0)

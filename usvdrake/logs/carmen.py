@@ -1,0 +1,126 @@
+"""Reader of CARMEN laser logs (old-style text), the classic 2D SLAM benchmarks.
+
+The Freiburg / Radish logs (intel, aces, fr079, mit-csail; Kümmerle et al. 2009, "On measuring
+the accuracy of SLAM algorithms") are one message per line::
+
+    ODOM x y theta tv rv accel ipc_timestamp ipc_hostname logger_timestamp
+    FLASER n r1 … rn x y theta odom_x odom_y odom_theta ipc_timestamp ipc_hostname logger_timestamp
+
+in metres, radians and seconds. FLASER carries no angles: its n beams span 180° from −90°
+(n = 180 → 1° steps; n = 360 or 361 → 0.5°). x y θ is the laser's pose, odom_* the robot's
+odometry (equal in intel; fr079's laser sits 0.04 m ahead). Readings at or above ``max_range``
+(50 m by default: aces reports no-return as 50.00, the others as ~81.9) are no-returns:
+``ranges = inf`` and ``valid = False``, the :class:`LaserScan` convention. The "corrected" logs
+have the same FLASER lines with SLAM-corrected poses, used as approximate ground truth.
+
+Files may be plain, bzip2 or gzip; the compression is recognised by its magic bytes.
+"""
+
+import bz2
+import gzip
+import io
+from collections.abc import Iterator
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+
+from usvdrake.sensors.messages import LaserScan
+
+FOV = np.pi  # [rad] FLASER field of view, first beam at −FOV/2
+
+
+class CarmenScan(NamedTuple):
+    timestamp: float  # [s] ipc timestamp (Unix epoch for intel and mit-csail, relative for others)
+    scan: LaserScan  # the front laser's scan
+    odometry_pose: np.ndarray  # (x [m], y [m], θ [rad]) of the pose chosen by ``pose=``
+
+
+def open_log(path: str | Path) -> io.TextIOBase:
+    """Open a log as text, decompressing bzip2 (``BZh``) or gzip (``1f 8b``) by magic bytes."""
+    with open(path, "rb") as f:
+        magic = f.read(3)
+    if magic == b"BZh":
+        return bz2.open(path, "rt", encoding="ascii", errors="replace")
+    if magic[:2] == b"\x1f\x8b":
+        return gzip.open(path, "rt", encoding="ascii", errors="replace")
+    return open(path, encoding="ascii", errors="replace")
+
+
+def beam_increment(n: int) -> float:
+    """Angle between FLASER beams [rad]: 180° over n beams, or over n − 1 when n is odd (361)."""
+    return FOV / (n - n % 2)
+
+
+def parse_flaser(tokens: list[str], pose: str = "odometry", max_range: float = 50.0) -> CarmenScan:
+    """One FLASER line, split on whitespace, as a :class:`CarmenScan`.
+
+    pose: ``"odometry"`` (odom_x odom_y odom_theta) or ``"laser"`` (x y theta — in corrected
+    logs, the corrected pose); max_range [m]: readings ≥ it are no-returns.
+    """
+    n = int(tokens[1])
+    r = np.array(tokens[2 : 2 + n], dtype=float)
+    p = np.array(tokens[2 + n : 8 + n], dtype=float)
+    timestamp = float(tokens[8 + n])
+    valid = (r > 0.0) & (r < max_range)
+    scan = LaserScan(
+        time=timestamp,
+        angle_min=-FOV / 2,
+        angle_increment=beam_increment(n),
+        range_min=0.0,
+        range_max=max_range,
+        ranges=np.where(valid, r, np.inf),
+        valid=valid,
+    )
+    if pose == "odometry":
+        chosen = p[3:6]
+    elif pose == "laser":
+        chosen = p[0:3]
+    else:
+        raise ValueError(f"pose must be 'odometry' or 'laser', got {pose!r}")
+    return CarmenScan(timestamp=timestamp, scan=scan, odometry_pose=chosen)
+
+
+def read_carmen(
+    path: str | Path, pose: str = "odometry", max_range: float = 50.0
+) -> Iterator[CarmenScan]:
+    """Yield ``(timestamp [s], LaserScan, pose (x, y, θ))`` for every FLASER line of a log.
+
+    Scans come in file order: the ipc timestamps of the real logs are not strictly monotone
+    (intel: 631 of 13 631 scans step back, by up to 0.9 s). Other messages (ODOM, PARAM, RLASER,
+    NEFF, comments) and malformed lines (a log truncated while recording) are skipped.
+    """
+    if pose not in ("odometry", "laser"):
+        raise ValueError(f"pose must be 'odometry' or 'laser', got {pose!r}")
+    with open_log(path) as f:
+        for line in f:
+            if not line.startswith("FLASER"):
+                continue
+            try:
+                yield parse_flaser(line.split(), pose, max_range)
+            except (IndexError, ValueError):
+                continue  # a line cut short (log truncated while recording)
+
+
+def read_poses(path: str | Path, pose: str = "laser") -> tuple[np.ndarray, np.ndarray]:
+    """Timestamps (n,) [s] and poses (n × 3) [m, m, rad] of every scan of a log — with the
+    default ``pose="laser"`` on a corrected log, the ground-truth trajectory."""
+    stamps, poses = [], []
+    for t, _, p in read_carmen(path, pose=pose):
+        stamps.append(t)
+        poses.append(p)
+    return np.array(stamps, dtype=float), np.array(poses, dtype=float).reshape(-1, 3)
+
+
+def read_odometry(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """Timestamps (n,) [s] and odometry poses (n × 3) of the ODOM lines (none in mit-csail)."""
+    stamps, poses = [], []
+    with open_log(path) as f:
+        for line in f:
+            if line.startswith("ODOM"):
+                tokens = line.split()
+                if len(tokens) < 8:
+                    continue  # cut short
+                poses.append([float(v) for v in tokens[1:4]])
+                stamps.append(float(tokens[7]))
+    return np.array(stamps, dtype=float), np.array(poses, dtype=float).reshape(-1, 3)
