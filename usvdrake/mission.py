@@ -11,7 +11,12 @@ from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator, Simula
 from pydrake.systems.framework import DiagramBuilder, EventStatus
 from pydrake.systems.primitives import LogVectorOutput
 
-from usvdrake.analysis.metrics import estimation_metrics, mission_metrics, tracking_metrics
+from usvdrake.analysis.metrics import (
+    estimation_metrics,
+    mission_metrics,
+    slam_metrics,
+    tracking_metrics,
+)
 from usvdrake.diagrams.vessel_diagram import build_vessel_diagram
 from usvdrake.scenario import Scenario
 from usvdrake.vessel import load_vessel
@@ -80,7 +85,11 @@ def run_mission(
     )
     period = 1.0 / scenario.visualization.rate_hz
     logged = ["ground_truth_state", "reference", "thrust_applied", "state_estimate"]
-    logged += [p for p in ("pose_measurement", "nmhe_solve_ms") if vessel_diagram.HasOutputPort(p)]
+    logged += [
+        p
+        for p in ("pose_measurement", "nmhe_solve_ms", "slam_pose")
+        if vessel_diagram.HasOutputPort(p)
+    ]
     loggers = {
         name: LogVectorOutput(vessel_diagram.GetOutputPort(name), builder, period)
         for name in logged
@@ -195,6 +204,11 @@ def run_mission(
             nmhe_solve_ms_median=float(np.median(ms)) if len(ms) else 0.0,
             nmhe_solve_ms_max=diag["max_ms"],
         )
+
+    if autonomy.HasSubsystemNamed("lidar_slam_2d"):
+        slam_sys = autonomy.GetSubsystemByName("lidar_slam_2d")
+        slam = slam_sys.slam(slam_sys.GetMyContextFromRoot(context))
+        metrics.update(slam_metrics(times, states, logs["slam_pose"].data().T, slam))
 
     result = MissionResult(metrics, times, states, reference, thrust)
     if out_dir is not None:

@@ -18,6 +18,7 @@ from usvdrake.sensors.pose_sensor import PoseSensorConfig
 from usvdrake.sensors.thrust_sensor import ThrustSensorConfig
 from usvdrake.systems.control.nmpc_problem import NmpcConfig
 from usvdrake.systems.estimation.nmhe_problem import NmheConfig
+from usvdrake.systems.slam.graph_slam import GraphSlamConfig
 from usvdrake.typed_yaml import ConfigError, get_dotted, load_typed, resolve_yaml
 from usvdrake.vessel import VESSEL_DIR, available_vessels
 
@@ -120,6 +121,14 @@ class SensorsConfig:
 
 
 @dataclass
+class SlamConfig:
+    # "none", or "graph": 002's sliding-window graph SLAM on lidar_scan (needs lidar2d). The
+    # SLAM runs in the autonomy half as an observer; metrics score it against ground truth.
+    method: str = "none"
+    graph: GraphSlamConfig = field(default_factory=GraphSlamConfig)
+
+
+@dataclass
 class Scenario:
     name: str = ""  # short identifier (defaults to the file name)
     description: str = ""  # one line for humans
@@ -135,6 +144,7 @@ class Scenario:
     # "baseline": LOS guidance + PD + thrust allocation over the waypoints; "nmpc": the NMPC of
     # 000 tracking an A* reference through the waypoints (goals in sequence) at mission.speed
     controller: str = "baseline"
+    slam: SlamConfig = field(default_factory=SlamConfig)
     nmpc: NmpcConfig = field(default_factory=NmpcConfig)
     sensors: SensorsConfig = field(default_factory=SensorsConfig)
     environment: EnvironmentConfig = field(default_factory=EnvironmentConfig)
@@ -225,6 +235,15 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
             raise ConfigError(file, key, f"{n} numbers", f"{len(get_dotted(s, key))} numbers")
     if s.estimator not in ESTIMATORS:
         raise ConfigError(file, "estimator", "one of " + ", ".join(ESTIMATORS), repr(s.estimator))
+    if s.slam.method not in ("none", "graph"):
+        raise ConfigError(file, "slam.method", "'none' or 'graph'", repr(s.slam.method))
+    if s.slam.method != "none" and "lidar2d" not in s.sensors.enabled:
+        raise ConfigError(
+            file,
+            "sensors.enabled",
+            "'lidar2d' in the list (the SLAM reads it)",
+            repr(s.sensors.enabled),
+        )
     if s.estimator == "nmhe" and "pose" not in s.sensors.enabled:
         raise ConfigError(
             file,

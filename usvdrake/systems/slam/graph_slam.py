@@ -1,0 +1,276 @@
+"""Sliding-window 2D lidar graph SLAM of 002 §II-C, §III-B, §IV-B (numerical core).
+
+* **Tracking**: every scan is matched by PLICP (002 eqs. 1-3) against the latest node's scan,
+  starting from the previous relative motion; the pose is the node's pose composed with it.
+* **Nodes**: a new node when the match exceeds ``node_translation`` or ``node_rotation``. Its
+  consecutive constraint (to the previous node) carries the Censi covariance (002 eqs. 4-10)
+  and is robustified with Barron's kernel (002 eqs. 13-14, ``alpha``, ``c``); it is also
+  densely linked (plain Gaussian) to the window's nodes within ``link_radius`` whose match
+  converges with a small residual.
+* **Optimisation**: Levenberg-Marquardt (gtsam, at most 100 iterations, as 002 §V-A) over the
+  nodes of the sliding window; nodes outside it that constrain it are held fixed by tight priors,
+  so the update time does not grow with the map.
+* **Loops** (002 §II-C): a node whose index differs from an older node's by ``loop_index_gap``
+  and lies within ``loop_radius`` of it is matched to it (from the graph's relative pose, with
+  PLICP's rotation search); an accepted match adds a robustified loop constraint and the whole
+  graph is optimised.
+* **Map** (002 §IV): a log-odds grid; a node's scan is inserted when the node is created and
+  re-rendered (removed at its old pose, inserted at its new one) when optimisation moved it by
+  more than ``rerender_translation`` / ``rerender_rotation``.
+
+Everything is plain Python/numpy/gtsam state in one object, so a LeafSystem can keep it in the
+Context and ``copy.deepcopy`` it.
+"""
+
+import copy
+import time
+from dataclasses import dataclass, field
+
+import gtsam
+import numpy as np
+from scipy.spatial import cKDTree
+
+from usvdrake.systems.slam.censi_covariance import plicp_covariance
+from usvdrake.systems.slam.occupancy_mapping import LogOddsGrid
+from usvdrake.systems.slam.plicp import plicp
+from usvdrake.systems.slam.robust_kernel import gtsam_barron
+
+
+@dataclass
+class GraphSlamConfig:
+    node_translation: float = 0.5  # [m] motion since the last node that makes a new node
+    node_rotation: float = 0.17  # [rad] (~10°) likewise
+    window: int = 15  # [nodes] optimised together on each new node
+    link_radius: float = 4.0  # [m] dense links to window nodes within this distance
+    max_link_residual: float = (
+        0.15  # [m] RMS point-to-line error that accepts a match (≥ the range noise)
+    )
+    min_link_points: int = 40  # correspondences a match needs
+    loop_index_gap: int = 40  # [nodes] index difference that makes a loop candidate
+    loop_radius: float = 6.0  # [m] distance that makes a loop candidate
+    alpha: float = 0.0  # Barron α of the robustified constraints (0: Cauchy)
+    c: float = 1.0  # Barron scale c (in units of the whitened error)
+    range_sigma: float = 0.02  # [m] range noise for the Censi covariance
+    min_sigma: list[float] = field(default_factory=lambda: [0.01, 0.01, 0.005])  # [m, m, rad] floor
+    max_iterations: int = 100  # LM steps (002 §V-A)
+    map_resolution: float = 0.2  # [m] online map (002 §V-B: 0.4 m in the valley)
+    map_origin: list[float] = field(default_factory=lambda: [-150.0, -150.0])  # [m]
+    map_size: list[float] = field(default_factory=lambda: [300.0, 300.0])  # [m] width, height
+    max_range: float = 30.0  # [m] beyond this a beam counts as no return for the map
+    rerender_translation: float = 0.05  # [m]
+    rerender_rotation: float = 0.01  # [rad]
+
+
+def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a ⊕ b for planar poses (x, y, θ)."""
+    c, s = np.cos(a[2]), np.sin(a[2])
+    return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], a[2] + b[2]])
+
+
+def between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a⁻¹ ⊕ b: b expressed in a's frame."""
+    c, s = np.cos(a[2]), np.sin(a[2])
+    d = b[:2] - a[:2]
+    return np.array(
+        [c * d[0] + s * d[1], -s * d[0] + c * d[1], np.angle(np.exp(1j * (b[2] - a[2])))]
+    )
+
+
+@dataclass
+class Node:
+    pose: np.ndarray  # (x, y, θ) in the map frame
+    points: np.ndarray  # (n, 2) scan points, sensor frame
+    ranges: np.ndarray  # for the map
+    angles: np.ndarray
+    time: float
+    rendered_pose: np.ndarray | None = None  # the pose its scan is in the map with
+    tree: cKDTree | None = None
+
+
+@dataclass
+class Constraint:
+    i: int
+    j: int
+    z: np.ndarray  # (x, y, θ) of node j in node i's frame
+    cov: np.ndarray  # 3 × 3
+    robust: bool
+    kind: str  # "consecutive", "link", "loop"
+
+
+class GraphSlam:
+    def __init__(self, cfg: GraphSlamConfig, initial_pose=(0.0, 0.0, 0.0)):
+        self.cfg = cfg
+        self.nodes: list[Node] = []
+        self.constraints: list[Constraint] = []
+        self.pose = np.asarray(initial_pose, float)
+        self._rel = np.zeros(3)  # current scan relative to the last node
+        self._last_step = np.zeros(3)
+        res = cfg.map_resolution
+        shape = (int(cfg.map_size[1] / res), int(cfg.map_size[0] / res))
+        self.map = LogOddsGrid(tuple(cfg.map_origin), res, shape)
+        self.stats = {"tracking_ms": [], "optimisation_ms": [], "loops": 0, "failed_matches": 0}
+        self._robust = gtsam_barron(cfg.alpha, cfg.c)
+
+    # --- per scan -----------------------------------------------------------------------------
+    def process(
+        self, points: np.ndarray, ranges: np.ndarray, angles: np.ndarray, t: float
+    ) -> np.ndarray:
+        """Track one scan; returns the current pose (x, y, θ)."""
+        t0 = time.perf_counter()
+        if len(points) < self.cfg.min_link_points:
+            self.stats["failed_matches"] += 1  # too few returns to match: keep the pose
+            return self.pose.copy()
+        if not self.nodes:
+            self._add_node(self.pose.copy(), points, ranges, angles, t)
+            self.stats["tracking_ms"].append((time.perf_counter() - t0) * 1e3)
+            return self.pose.copy()
+        last = self.nodes[-1]
+        guess = compose(self._rel, self._last_step)  # constant velocity
+        res = plicp(last.points, points, initial=tuple(guess), tree=last.tree)
+        if res.n_valid < self.cfg.min_link_points or not np.isfinite(res.theta):
+            self.stats["failed_matches"] += 1
+            rel = guess
+        else:
+            rel = np.array([res.t[0], res.t[1], res.theta])
+        self._last_step = between(self._rel, rel)
+        self._rel = rel
+        self.pose = compose(last.pose, rel)
+        if (
+            np.hypot(rel[0], rel[1]) > self.cfg.node_translation
+            or abs(rel[2]) > self.cfg.node_rotation
+        ):
+            cov = (
+                self._covariance(last.points, points, res)
+                if res.n_valid >= self.cfg.min_link_points
+                else None
+            )
+            self._new_node(points, ranges, angles, t, rel, cov)
+        self.stats["tracking_ms"].append((time.perf_counter() - t0) * 1e3)
+        return self.pose.copy()
+
+    def _covariance(self, ref, cur, res) -> np.ndarray:
+        try:
+            cov = plicp_covariance(ref, cur, res, self.cfg.range_sigma)
+        except np.linalg.LinAlgError:
+            cov = np.diag(np.square(self.cfg.min_sigma)) * 100.0
+        floor = np.diag(np.square(self.cfg.min_sigma))
+        if not np.all(np.isfinite(cov)):
+            return floor * 100.0
+        return cov + floor
+
+    # --- nodes and constraints ----------------------------------------------------------------
+    def _add_node(self, pose, points, ranges, angles, t) -> Node:
+        node = Node(pose, points, ranges, angles, t, tree=cKDTree(points))
+        self.nodes.append(node)
+        self._render(node)
+        return node
+
+    def _new_node(self, points, ranges, angles, t, rel, cov) -> None:
+        prev = len(self.nodes) - 1
+        node = self._add_node(self.pose.copy(), points, ranges, angles, t)
+        k = len(self.nodes) - 1
+        if cov is None:
+            cov = np.diag(np.square(self.cfg.min_sigma)) * 100.0
+        self.constraints.append(Constraint(prev, k, rel.copy(), cov, True, "consecutive"))
+        self._rel = np.zeros(3)
+        lo = max(0, k - self.cfg.window)
+        for i in range(lo, prev):
+            other = self.nodes[i]
+            if np.hypot(*(other.pose[:2] - node.pose[:2])) <= self.cfg.link_radius:
+                self._link(i, k, robust=False, kind="link")
+        loop = False
+        for i in range(0, k - self.cfg.loop_index_gap):
+            if np.hypot(*(self.nodes[i].pose[:2] - node.pose[:2])) <= self.cfg.loop_radius:
+                loop |= self._link(i, k, robust=True, kind="loop", search=True)
+        t0 = time.perf_counter()
+        self.optimise(full=loop)
+        self.stats["optimisation_ms"].append((time.perf_counter() - t0) * 1e3)
+        if loop:
+            self.stats["loops"] += 1
+
+    def _link(self, i: int, k: int, robust: bool, kind: str, search: bool = False) -> bool:
+        a, b = self.nodes[i], self.nodes[k]
+        guess = between(a.pose, b.pose)
+        res = plicp(a.points, b.points, initial=tuple(guess), tree=a.tree, rotation_search=search)
+        if not (
+            res.converged
+            and res.n_valid >= self.cfg.min_link_points
+            and res.residual <= self.cfg.max_link_residual
+        ):
+            self.stats["failed_matches"] += 1
+            return False
+        z = np.array([res.t[0], res.t[1], res.theta])
+        self.constraints.append(
+            Constraint(i, k, z, self._covariance(a.points, b.points, res), robust, kind)
+        )
+        return True
+
+    # --- optimisation ---------------------------------------------------------------------------
+    def optimise(self, full: bool = False) -> None:
+        """LM over the window (or the whole graph) with gtsam; moves nodes and re-renders them."""
+        n = len(self.nodes)
+        active = set(range(n)) if full else set(range(max(0, n - self.cfg.window), n))
+        graph = gtsam.NonlinearFactorGraph()
+        values = gtsam.Values()
+        used = set()
+        for c in self.constraints:
+            if c.i in active or c.j in active:
+                noise = gtsam.noiseModel.Gaussian.Covariance(c.cov)
+                if c.robust:
+                    noise = gtsam.noiseModel.Robust.Create(self._robust, noise)
+                graph.add(gtsam.BetweenFactorPose2(c.i, c.j, gtsam.Pose2(*c.z), noise))
+                used.update((c.i, c.j))
+        fixed = gtsam.noiseModel.Diagonal.Sigmas(np.array([1e-6, 1e-6, 1e-7]))
+        anchor = min(active)
+        for k in used | {anchor}:
+            values.insert(k, gtsam.Pose2(*self.nodes[k].pose))
+            if k not in active or k == anchor:
+                graph.add(gtsam.PriorFactorPose2(k, gtsam.Pose2(*self.nodes[k].pose), fixed))
+        params = gtsam.LevenbergMarquardtParams()
+        params.setMaxIterations(self.cfg.max_iterations)
+        result = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
+        for k in used | {anchor}:
+            p = result.atPose2(k)
+            self.nodes[k].pose = np.array([p.x(), p.y(), p.theta()])
+        self.pose = compose(self.nodes[-1].pose, self._rel)
+        for node in self.nodes:
+            self._rerender_if_moved(node)
+
+    # --- map ------------------------------------------------------------------------------------
+    def _render(self, node: Node) -> None:
+        self.map.insert_scan(node.pose, node.ranges, node.angles, self.cfg.max_range)
+        node.rendered_pose = node.pose.copy()
+
+    def _rerender_if_moved(self, node: Node) -> None:
+        d = between(node.rendered_pose, node.pose)
+        if (
+            np.hypot(d[0], d[1]) > self.cfg.rerender_translation
+            or abs(d[2]) > self.cfg.rerender_rotation
+        ):
+            self.map.remove_scan(node.rendered_pose, node.ranges, node.angles, self.cfg.max_range)
+            self._render(node)
+
+    def trajectory(self) -> np.ndarray:
+        """Node poses (n × 3)."""
+        return np.array([n.pose for n in self.nodes])
+
+    def __deepcopy__(self, memo) -> "GraphSlam":
+        """A structural copy: node scans (points, ranges, angles, KD-tree) and constraints never
+        change after creation, so copies share them; poses, the map's arrays and the statistics
+        are copied. Drake copies a Context's abstract state on every update, so this keeps a
+        LeafSystem's state independent per Context at the cost of the map arrays only."""
+        other = copy.copy(self)
+        other.nodes = [copy.copy(n) for n in self.nodes]
+        for n in other.nodes:
+            n.pose = n.pose.copy()
+            n.rendered_pose = None if n.rendered_pose is None else n.rendered_pose.copy()
+        other.constraints = list(self.constraints)
+        other.pose, other._rel, other._last_step = (
+            self.pose.copy(),
+            self._rel.copy(),
+            self._last_step.copy(),
+        )
+        other.map = copy.copy(self.map)
+        other.map._sum, other.map._count = self.map._sum.copy(), self.map._count.copy()
+        other.stats = {k: (list(v) if isinstance(v, list) else v) for k, v in self.stats.items()}
+        return other
