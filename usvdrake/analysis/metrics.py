@@ -106,6 +106,12 @@ def slam_metrics(times: np.ndarray, states: np.ndarray, slam_poses: np.ndarray, 
     keep = times >= 1.0
     e = np.hypot(slam_poses[keep, 0] - states[keep, 0], slam_poses[keep, 1] - states[keep, 1])
     h = np.angle(np.exp(1j * (slam_poses[keep, 2] - states[keep, 2])))
+    from usvdrake.analysis.trajectory_metrics import rpe, trajectory_from_planar
+
+    est = trajectory_from_planar(times[keep], slam_poses[keep])
+    ref = trajectory_from_planar(times[keep], states[keep, :3])
+    rpe_1 = rpe(est, ref, 1.0, unit="meters") if keep.sum() > 2 else {}
+    rpe_10 = rpe(est, ref, 10.0, unit="meters") if keep.sum() > 2 else {}
     track = np.asarray(slam.stats["tracking_ms"]) if slam.stats["tracking_ms"] else np.zeros(1)
     opt = (
         np.asarray(slam.stats["optimisation_ms"]) if slam.stats["optimisation_ms"] else np.zeros(1)
@@ -114,6 +120,9 @@ def slam_metrics(times: np.ndarray, states: np.ndarray, slam_poses: np.ndarray, 
         "ate_m": float(np.sqrt(np.mean(e**2))) if len(e) else 0.0,
         "slam_heading_rmse_rad": float(np.sqrt(np.mean(h**2))) if len(h) else 0.0,
         "slam_final_error_m": float(e[-1]) if len(e) else 0.0,
+        # RPE (Sturm et al. 2012) over 1 m and 10 m of travel, translational RMSE [m]
+        "rpe_m": float(rpe_1.get("rpe_trans_rmse_m", 0.0)),
+        "rpe_10m_m": float(rpe_10.get("rpe_trans_rmse_m", 0.0)),
         "slam_nodes": len(slam.nodes),
         "slam_constraints": len(slam.constraints),
         "slam_loops": int(slam.stats["loops"]),
