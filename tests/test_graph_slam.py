@@ -52,6 +52,7 @@ def loop_run(noise: bool, laps: float = 1.15, steps: int = 300):
         v = np.isfinite(r)
         pts = np.column_stack([r[v] * np.cos(angles[v]), r[v] * np.sin(angles[v])])
         est.append(slam.process(pts, r, angles, 0.1 * k))
+        slam.optimise_pending()
     return slam, np.array(est), np.column_stack([xs, ys, heading])
 
 

@@ -129,4 +129,5 @@ def slam_metrics(times: np.ndarray, states: np.ndarray, slam_poses: np.ndarray, 
         "tracking_ms_median": float(np.median(track)),
         "optimisation_ms_median": float(np.median(opt)),
         "optimisation_ms_max": float(np.max(opt)),
+        "full_optimisation_ms_max": float(max(slam.stats["full_optimisation_ms"], default=0.0)),
     }

@@ -12,8 +12,9 @@
   so the update time does not grow with the map.
 * **Loops** (002 §II-C): a node whose index differs from an older node's by ``loop_index_gap``
   and lies within ``loop_radius`` of it is matched to it (from the graph's relative pose, with
-  PLICP's rotation search); an accepted match adds a robustified loop constraint and the whole
-  graph is optimised.
+  PLICP's rotation search); an accepted match adds a robustified loop constraint and marks the
+  whole graph for optimisation, which :meth:`GraphSlam.optimise_pending` runs when the caller
+  decides (its own slower event in ``LidarSlam2D``, so the per-scan update never stalls).
 * **Map** (002 §IV): a log-odds grid; a node's scan is inserted when the node is created and
   re-rendered (removed at its old pose, inserted at its new one) when optimisation moved it by
   more than ``rerender_translation`` / ``rerender_rotation``.
@@ -108,7 +109,14 @@ class GraphSlam:
         res = cfg.map_resolution
         shape = (int(cfg.map_size[1] / res), int(cfg.map_size[0] / res))
         self.map = LogOddsGrid(tuple(cfg.map_origin), res, shape)
-        self.stats = {"tracking_ms": [], "optimisation_ms": [], "loops": 0, "failed_matches": 0}
+        self.stats = {
+            "tracking_ms": [],
+            "optimisation_ms": [],
+            "full_optimisation_ms": [],
+            "loops": 0,
+            "failed_matches": 0,
+        }
+        self.full_pending = False
         self._robust = gtsam_barron(cfg.alpha, cfg.c)
 
     # --- per scan -----------------------------------------------------------------------------
@@ -183,10 +191,11 @@ class GraphSlam:
             if np.hypot(*(self.nodes[i].pose[:2] - node.pose[:2])) <= self.cfg.loop_radius:
                 loop |= self._link(i, k, robust=True, kind="loop", search=True)
         t0 = time.perf_counter()
-        self.optimise(full=loop)
+        self.optimise(full=False)
         self.stats["optimisation_ms"].append((time.perf_counter() - t0) * 1e3)
         if loop:
             self.stats["loops"] += 1
+            self.full_pending = True  # the whole graph, at the caller's pace (optimise_pending)
 
     def _link(self, i: int, k: int, robust: bool, kind: str, search: bool = False) -> bool:
         a, b = self.nodes[i], self.nodes[k]
@@ -206,6 +215,17 @@ class GraphSlam:
         return True
 
     # --- optimisation ---------------------------------------------------------------------------
+    def optimise_pending(self) -> bool:
+        """Run the full-graph optimisation a loop closure asked for (002 runs it in its own
+        thread; a LeafSystem runs it in its own, slower event). Returns whether it ran."""
+        if not self.full_pending:
+            return False
+        t0 = time.perf_counter()
+        self.optimise(full=True)
+        self.full_pending = False
+        self.stats["full_optimisation_ms"].append((time.perf_counter() - t0) * 1e3)
+        return True
+
     def optimise(self, full: bool = False) -> None:
         """LM over the window (or the whole graph) with gtsam; moves nodes and re-renders them."""
         n = len(self.nodes)

@@ -26,7 +26,8 @@ class LidarSlam2D(LeafSystem):
     ``slam_pose`` = [x y ψ] of the vessel in the map frame (the initial pose's frame);
     ``slam_covariance`` (9, row-major 3 × 3) is the Censi covariance of the latest node's
     consecutive constraint; ``slam_map`` an :class:`OccupancyGrid` rendered on demand. The update
-    runs at the lidar's period and skips a scan it has already seen (by its time stamp).
+    runs at the lidar's period and skips a scan it has already seen (by its time stamp); the
+    full-graph optimisation after a loop closure runs in a separate 1 Hz event.
     """
 
     def __init__(self, cfg: GraphSlamConfig, initial_pose, mount, period: float):
@@ -37,6 +38,8 @@ class LidarSlam2D(LeafSystem):
         self._slam = self.DeclareAbstractState(AbstractValue.Make(GraphSlam(cfg, sensor0)))
         self._last = self.DeclareDiscreteState(BasicVector([-1.0]))
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
+        # the heavy work (full-graph optimisation after a loop closure) has its own 1 Hz event
+        self.DeclarePeriodicUnrestrictedUpdateEvent(1.0, 0.5 * period, self._background)
         deps = {self.abstract_state_ticket(self._slam)}
         self.DeclareVectorOutputPort("slam_pose", 3, self._calc_pose, prerequisites_of_calc=deps)
         self.DeclareVectorOutputPort(
@@ -64,6 +67,9 @@ class LidarSlam2D(LeafSystem):
         pts = np.column_stack([r[v] * np.cos(a[v]), r[v] * np.sin(a[v])])
         slam.process(pts, r, a, scan.time)
         state.get_mutable_discrete_state(self._last).SetAtIndex(0, scan.time)
+
+    def _background(self, context, state):
+        state.get_mutable_abstract_state(self._slam).get_value().optimise_pending()
 
     def _calc_pose(self, context, output):
         sensor = self.slam(context).pose
