@@ -209,7 +209,32 @@ def make_parser() -> argparse.ArgumentParser:
     d.add_argument("--trials", type=int, default=5)
     d.add_argument("--duration", type=float, default=150.0, help="nominal trial length [s]")
     d.set_defaults(func=cmd_identify_data)
+    m = sub.add_parser("slam2d", help="2D graph SLAM (002) on a recorded CARMEN log, scan only")
+    m.add_argument("log", help="CARMEN .clf/.log (plain, gzip or bzip2)")
+    m.add_argument("--out", default="out/slam2d", help="output folder")
+    m.add_argument("--reference", default=None, help="a log whose poses are ground truth (ATE)")
+    m.add_argument("--resolution", type=float, default=0.1, help="map cell size [m]")
+    m.add_argument("--max-scans", type=int, default=None, help="stop after this many scans")
+    m.add_argument("--quiet", action="store_true", help="no progress bar")
+    m.set_defaults(func=cmd_slam2d)
     return p
+
+
+def cmd_slam2d(args) -> int:
+    from usvdrake.systems.slam.offline import run_slam2d
+
+    metrics = run_slam2d(
+        args.log, args.out, args.reference, args.resolution, args.max_scans, progress=not args.quiet
+    )
+    width = max(len(k) for k in metrics)
+    for key, value in metrics.items():
+        print(
+            f"  {key:<{width}} {value:.4g}"
+            if isinstance(value, float)
+            else f"  {key:<{width}} {value}"
+        )
+    print(f"  trajectory.tum, map.png, metrics.json in {args.out}")
+    return 0
 
 
 def main(argv=None) -> int:

@@ -49,6 +49,8 @@ class GraphSlamConfig:
     min_link_points: int = 40  # correspondences a match needs
     loop_index_gap: int = 40  # [nodes] index difference that makes a loop candidate
     loop_radius: float = 6.0  # [m] distance that makes a loop candidate
+    max_loop_residual: float = 0.05  # [m] stricter acceptance for loops (a false loop is costly)
+    min_loop_points: int = 100  # correspondences a loop match needs
     alpha: float = 0.0  # Barron α of the robustified constraints (0: Cauchy)
     c: float = 1.0  # Barron scale c (in units of the whitened error)
     range_sigma: float = 0.02  # [m] range noise for the Censi covariance
@@ -135,6 +137,13 @@ class GraphSlam:
         last = self.nodes[-1]
         guess = compose(self._rel, self._last_step)  # constant velocity
         res = plicp(last.points, points, initial=tuple(guess), tree=last.tree)
+        if not res.converged or res.residual > self.cfg.max_link_residual:
+            # a poor match from the constant-velocity guess: retry with the rotation search
+            retry = plicp(
+                last.points, points, initial=tuple(guess), tree=last.tree, rotation_search=True
+            )
+            if retry.n_valid >= self.cfg.min_link_points and retry.residual < res.residual:
+                res = retry
         if res.n_valid < self.cfg.min_link_points or not np.isfinite(res.theta):
             self.stats["failed_matches"] += 1
             rel = guess
@@ -201,11 +210,10 @@ class GraphSlam:
         a, b = self.nodes[i], self.nodes[k]
         guess = between(a.pose, b.pose)
         res = plicp(a.points, b.points, initial=tuple(guess), tree=a.tree, rotation_search=search)
-        if not (
-            res.converged
-            and res.n_valid >= self.cfg.min_link_points
-            and res.residual <= self.cfg.max_link_residual
-        ):
+        loop = kind == "loop"
+        need = self.cfg.min_loop_points if loop else self.cfg.min_link_points
+        limit = self.cfg.max_loop_residual if loop else self.cfg.max_link_residual
+        if not (res.converged and res.n_valid >= need and res.residual <= limit):
             self.stats["failed_matches"] += 1
             return False
         z = np.array([res.t[0], res.t[1], res.theta])

@@ -137,7 +137,8 @@ def solve_point_to_line(
         lam = roots.real
     # x_r(λ) = −(S^A + 2λI) h / |S + 2λI| for every candidate at once; its direction is θ.
     xr = -(sah[None, :] + 2.0 * lam[:, None] * h[None, :])
-    xr /= (lam**2 * 4.0 + 2.0 * tr_s * lam + det_s)[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):  # non-finite candidates dropped below
+        xr /= (lam**2 * 4.0 + 2.0 * tr_s * lam + det_s)[:, None]
     ok = np.all(np.isfinite(xr), axis=1) & np.any(xr != 0.0, axis=1)
     phi = np.arctan2(xr[ok, 1], xr[ok, 0]) if ok.any() else np.zeros(1)
     u = np.stack([np.cos(phi), np.sin(phi)])
