@@ -110,8 +110,14 @@ def slam_metrics(times: np.ndarray, states: np.ndarray, slam_poses: np.ndarray, 
 
     est = trajectory_from_planar(times[keep], slam_poses[keep])
     ref = trajectory_from_planar(times[keep], states[keep, :3])
-    rpe_1 = rpe(est, ref, 1.0, unit="meters") if keep.sum() > 2 else {}
-    rpe_10 = rpe(est, ref, 10.0, unit="meters") if keep.sum() > 2 else {}
+
+    def rpe_or_none(delta: float):
+        """RPE over ``delta`` metres of travel, None when the run is shorter than that."""
+        try:
+            return float(rpe(est, ref, delta, unit="meters")["rpe_trans_rmse_m"])
+        except ValueError:
+            return None
+
     track = np.asarray(slam.stats["tracking_ms"]) if slam.stats["tracking_ms"] else np.zeros(1)
     opt = (
         np.asarray(slam.stats["optimisation_ms"]) if slam.stats["optimisation_ms"] else np.zeros(1)
@@ -121,8 +127,8 @@ def slam_metrics(times: np.ndarray, states: np.ndarray, slam_poses: np.ndarray, 
         "slam_heading_rmse_rad": float(np.sqrt(np.mean(h**2))) if len(h) else 0.0,
         "slam_final_error_m": float(e[-1]) if len(e) else 0.0,
         # RPE (Sturm et al. 2012) over 1 m and 10 m of travel, translational RMSE [m]
-        "rpe_m": float(rpe_1.get("rpe_trans_rmse_m", 0.0)),
-        "rpe_10m_m": float(rpe_10.get("rpe_trans_rmse_m", 0.0)),
+        "rpe_m": rpe_or_none(1.0),
+        "rpe_10m_m": rpe_or_none(10.0),
         "slam_nodes": len(slam.nodes),
         "slam_constraints": len(slam.constraints),
         "slam_loops": int(slam.stats["loops"]),
