@@ -7,7 +7,7 @@ import pytest
 import shapely
 
 from usvdrake.sensors.lidar_model import LidarConfig, LidarModel, body_motion, preset_by_name
-from usvdrake.systems.slam.hector import HectorSlam, interpolate_map
+from usvdrake.systems.slam.hector import HectorMapper, interpolate_map
 from usvdrake.worlds import make_world
 
 RES = 0.05  # [m] finest map cell
@@ -47,10 +47,10 @@ def s_curve(n: int = 60, u: float = 0.2) -> np.ndarray:
 
 
 def run_slam(world, noise: bool, **kwargs) -> np.ndarray:
-    """Errors (n × 3: x [m], y [m], ψ [rad]) of HectorSlam along s_curve()."""
+    """Errors (n × 3: x [m], y [m], ψ [rad]) of HectorMapper along s_curve()."""
     states = s_curve()
     model, angles = lidar(world, noise)
-    slam = HectorSlam(ORIGIN, SIZE, RES, levels=3, initial_pose=states[0, :3], **kwargs)
+    slam = HectorMapper(ORIGIN, SIZE, RES, levels=3, initial_pose=states[0, :3], **kwargs)
     errors = []
     for k, q in enumerate(states):
         pose = slam.update(model.sweep(q, k).ranges[0], angles, MAX_RANGE)
@@ -99,7 +99,7 @@ def test_matcher_recovers_known_offset(world):
     q = s_curve()[0]
     model, angles = lidar(world, noise=False)
     ranges = model.sweep(q, 0).ranges[0]
-    slam = HectorSlam(ORIGIN, SIZE, RES, levels=3, initial_pose=q[:3])
+    slam = HectorMapper(ORIGIN, SIZE, RES, levels=3, initial_pose=q[:3])
     slam.update(ranges, angles, MAX_RANGE)  # the first scan builds the map at the true pose
     hit = np.isfinite(ranges)
     points = np.column_stack([ranges[hit] * np.cos(angles[hit]), ranges[hit] * np.sin(angles[hit])])
@@ -116,7 +116,7 @@ def test_grid_aligned_walls_bias_is_below_a_cell(world):
     q = s_curve()[0]
     model, angles = lidar(world, noise=False)
     ranges = model.sweep(q, 0).ranges[0]
-    slam = HectorSlam((-2.0, -1.0), SIZE, RES, levels=3, initial_pose=q[:3])
+    slam = HectorMapper((-2.0, -1.0), SIZE, RES, levels=3, initial_pose=q[:3])
     slam.update(ranges, angles, MAX_RANGE)
     hit = np.isfinite(ranges)
     points = np.column_stack([ranges[hit] * np.cos(angles[hit]), ranges[hit] * np.sin(angles[hit])])
@@ -127,7 +127,7 @@ def test_grid_aligned_walls_bias_is_below_a_cell(world):
 def test_first_scan_is_inserted_at_the_initial_pose(world):
     q = s_curve()[0]
     model, angles = lidar(world, noise=False)
-    slam = HectorSlam(ORIGIN, SIZE, RES, levels=3, initial_pose=q[:3])
+    slam = HectorMapper(ORIGIN, SIZE, RES, levels=3, initial_pose=q[:3])
     pose = slam.update(model.sweep(q, 0).ranges[0], angles, MAX_RANGE)
     np.testing.assert_array_equal(pose, q[:3])
     assert np.isinf(slam.covariance).all()

@@ -19,6 +19,7 @@ from usvdrake.sensors.thrust_sensor import ThrustSensorConfig
 from usvdrake.systems.control.nmpc_problem import NmpcConfig
 from usvdrake.systems.estimation.nmhe_problem import NmheConfig
 from usvdrake.systems.slam.graph_slam import GraphSlamConfig
+from usvdrake.systems.slam.hector import HectorConfig
 from usvdrake.typed_yaml import ConfigError, get_dotted, load_typed, resolve_yaml
 from usvdrake.vessel import VESSEL_DIR, available_vessels
 
@@ -122,10 +123,12 @@ class SensorsConfig:
 
 @dataclass
 class SlamConfig:
-    # "none", or "graph": 002's sliding-window graph SLAM on lidar_scan (needs lidar2d). The
-    # SLAM runs in the autonomy half as an observer; metrics score it against ground truth.
+    # "none"; "graph": 002's sliding-window graph SLAM; "hector": 003's Hector-style SLAM; both
+    # on lidar_scan (needs lidar2d). The SLAM runs in the autonomy half as an observer; metrics
+    # score it against ground truth.
     method: str = "none"
     graph: GraphSlamConfig = field(default_factory=GraphSlamConfig)
+    hector: HectorConfig = field(default_factory=HectorConfig)
 
 
 @dataclass
@@ -235,8 +238,8 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
             raise ConfigError(file, key, f"{n} numbers", f"{len(get_dotted(s, key))} numbers")
     if s.estimator not in ESTIMATORS:
         raise ConfigError(file, "estimator", "one of " + ", ".join(ESTIMATORS), repr(s.estimator))
-    if s.slam.method not in ("none", "graph"):
-        raise ConfigError(file, "slam.method", "'none' or 'graph'", repr(s.slam.method))
+    if s.slam.method not in ("none", "graph", "hector"):
+        raise ConfigError(file, "slam.method", "'none', 'graph' or 'hector'", repr(s.slam.method))
     if s.slam.method != "none" and "lidar2d" not in s.sensors.enabled:
         raise ConfigError(
             file,

@@ -118,10 +118,9 @@ def slam_metrics(times: np.ndarray, states: np.ndarray, slam_poses: np.ndarray, 
         except ValueError:
             return None
 
-    track = np.asarray(slam.stats["tracking_ms"]) if slam.stats["tracking_ms"] else np.zeros(1)
-    opt = (
-        np.asarray(slam.stats["optimisation_ms"]) if slam.stats["optimisation_ms"] else np.zeros(1)
-    )
+    stats = getattr(slam, "stats", {})
+    track = np.asarray(stats.get("tracking_ms") or [0.0])
+    opt = np.asarray(stats.get("optimisation_ms") or [0.0])
     return {
         "ate_m": float(np.sqrt(np.mean(e**2))) if len(e) else 0.0,
         "slam_heading_rmse_rad": float(np.sqrt(np.mean(h**2))) if len(h) else 0.0,
@@ -129,11 +128,11 @@ def slam_metrics(times: np.ndarray, states: np.ndarray, slam_poses: np.ndarray, 
         # RPE (Sturm et al. 2012) over 1 m and 10 m of travel, translational RMSE [m]
         "rpe_m": rpe_or_none(1.0),
         "rpe_10m_m": rpe_or_none(10.0),
-        "slam_nodes": len(slam.nodes),
-        "slam_constraints": len(slam.constraints),
-        "slam_loops": int(slam.stats["loops"]),
+        "slam_nodes": len(getattr(slam, "nodes", [])),
+        "slam_constraints": len(getattr(slam, "constraints", [])),
+        "slam_loops": int(stats.get("loops", 0)),
         "tracking_ms_median": float(np.median(track)),
         "optimisation_ms_median": float(np.median(opt)),
         "optimisation_ms_max": float(np.max(opt)),
-        "full_optimisation_ms_max": float(max(slam.stats["full_optimisation_ms"], default=0.0)),
+        "full_optimisation_ms_max": float(max(stats.get("full_optimisation_ms", []), default=0.0)),
     }

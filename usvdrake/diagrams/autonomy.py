@@ -88,17 +88,18 @@ def make_autonomy(scenario: Scenario, vessel: VesselParams, world: World) -> Dia
         builder.ExportOutput(controller.GetOutputPort("tau_desired"), "tau_desired")
         builder.ExportOutput(allocation.GetOutputPort("tau_achieved"), "tau_achieved")
     builder.ExportOutput(estimate, "state_estimate")
-    if scenario.slam.method == "graph":
-        from usvdrake.systems.slam.lidar_slam2d import LidarSlam2D
+    if scenario.slam.method != "none":
+        from usvdrake.sensors.lidar_model import preset_by_name
+        from usvdrake.systems.slam.lidar_slam2d import HectorSlam, LidarSlam2D
 
         lidar = scenario.sensors.lidar2d
-        from usvdrake.sensors.lidar_model import preset_by_name
-
         period = 1.0 / (lidar.rate_hz or preset_by_name(lidar.preset).rate_hz)
-        slam = builder.AddNamedSystem(
-            "lidar_slam_2d",
-            LidarSlam2D(scenario.slam.graph, scenario.initial_state[:3], lidar.mount, period),
-        )
+        start = scenario.initial_state[:3]
+        if scenario.slam.method == "graph":
+            slam = LidarSlam2D(scenario.slam.graph, start, lidar.mount, period)
+        else:
+            slam = HectorSlam(scenario.slam.hector, start, lidar.mount, period)
+        slam = builder.AddNamedSystem("lidar_slam_2d", slam)
         builder.ExportInput(slam.GetInputPort("lidar_scan"), "lidar_scan")
         for port in ("slam_pose", "slam_covariance", "slam_map"):
             builder.ExportOutput(slam.GetOutputPort(port), port)

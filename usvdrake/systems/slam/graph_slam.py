@@ -223,6 +223,26 @@ class GraphSlam:
         return True
 
     # --- optimisation ---------------------------------------------------------------------------
+    # --- the scan-SLAM backend protocol of ``LidarSlam2D`` ------------------------------------
+    def process_scan(self, scan, max_range: float | None = None) -> None:
+        a, r, v = scan.angles, scan.ranges, scan.valid
+        self.process(np.column_stack([r[v] * np.cos(a[v]), r[v] * np.sin(a[v])]), r, a, scan.time)
+
+    @property
+    def sensor_pose(self) -> np.ndarray:
+        return self.pose
+
+    def pose_covariance(self) -> np.ndarray:
+        """The Censi covariance of the latest node's consecutive constraint."""
+        cons = [c for c in self.constraints if c.kind == "consecutive"]
+        return cons[-1].cov if cons else np.diag(np.square(self.cfg.min_sigma))
+
+    def occupancy(self):
+        return self.map.to_occupancy_grid()
+
+    def background(self) -> None:
+        self.optimise_pending()
+
     def optimise_pending(self) -> bool:
         """Run the full-graph optimisation a loop closure asked for (002 runs it in its own
         thread; a LeafSystem runs it in its own, slower event). Returns whether it ran."""

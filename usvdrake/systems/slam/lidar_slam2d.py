@@ -1,4 +1,5 @@
-"""``LidarSlam2D``: the sliding-window graph SLAM of 002 on the station's ``lidar_scan``."""
+"""``LidarSlam2D`` (002's sliding-window graph SLAM) and ``HectorSlam`` (003's Hector-style
+SLAM) on the station's ``lidar_scan``: one LeafSystem shell over interchangeable backends."""
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -6,12 +7,13 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 
 from usvdrake.sensors.messages import LaserScan
 from usvdrake.systems.slam.graph_slam import GraphSlam, GraphSlamConfig, between, compose
+from usvdrake.systems.slam.hector import HectorConfig, make_hector
 from usvdrake.worlds.world import OccupancyGrid
 
 
 class LidarSlam2D(LeafSystem):
-    """Feeds every new scan to :class:`GraphSlam` (kept in the Context as abstract state) and
-    reports the vessel's pose: the lidar's pose composed with the inverse of its mount.
+    """Feeds every new scan to a SLAM backend kept in the Context (abstract state) and reports
+    the vessel's pose: the lidar's pose composed with the inverse of its mount.
 
     .. pydrake_system::
 
@@ -24,21 +26,25 @@ class LidarSlam2D(LeafSystem):
         - slam_map
 
     ``slam_pose`` = [x y ψ] of the vessel in the map frame (the initial pose's frame);
-    ``slam_covariance`` (9, row-major 3 × 3) is the Censi covariance of the latest node's
-    consecutive constraint; ``slam_map`` an :class:`OccupancyGrid` rendered on demand. The update
-    runs at the lidar's period and skips a scan it has already seen (by its time stamp); the
-    full-graph optimisation after a loop closure runs in a separate 1 Hz event.
+    ``slam_covariance`` (9, row-major 3 × 3) the backend's pose covariance; ``slam_map`` an
+    :class:`OccupancyGrid` rendered on demand. The update runs at the lidar's period and skips a
+    scan it has already seen (by its time stamp); the backend's deferred heavy work (the graph's
+    full optimisation after a loop closure) runs in a separate 1 Hz event, never in a scan update.
+
+    A backend offers ``process_scan(scan)``, ``sensor_pose``, ``pose_covariance()``,
+    ``occupancy()`` and ``background()``: :class:`GraphSlam` (here) or the Hector mapper
+    (:class:`HectorSlam`).
     """
 
-    def __init__(self, cfg: GraphSlamConfig, initial_pose, mount, period: float):
+    def __init__(self, cfg: GraphSlamConfig, initial_pose, mount, period: float, backend=None):
         super().__init__()
         self._mount = np.array([mount[0], mount[1], mount[3]], float)  # x, y, yaw of the lidar
         sensor0 = compose(np.asarray(initial_pose, float), self._mount)
+        backend = backend(sensor0) if backend is not None else GraphSlam(cfg, sensor0)
         self._scan = self.DeclareAbstractInputPort("lidar_scan", AbstractValue.Make(LaserScan()))
-        self._slam = self.DeclareAbstractState(AbstractValue.Make(GraphSlam(cfg, sensor0)))
+        self._slam = self.DeclareAbstractState(AbstractValue.Make(backend))
         self._last = self.DeclareDiscreteState(BasicVector([-1.0]))
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
-        # the heavy work (full-graph optimisation after a loop closure) has its own 1 Hz event
         self.DeclarePeriodicUnrestrictedUpdateEvent(1.0, 0.5 * period, self._background)
         deps = {self.abstract_state_ticket(self._slam)}
         self.DeclareVectorOutputPort("slam_pose", 3, self._calc_pose, prerequisites_of_calc=deps)
@@ -52,34 +58,43 @@ class LidarSlam2D(LeafSystem):
             prerequisites_of_calc=deps,
         )
 
-    def slam(self, context) -> GraphSlam:
+    def slam(self, context):
         return context.get_abstract_state(self._slam).get_value()
 
     def _update(self, context, state):
         scan = self._scan.Eval(context)
-        if len(scan.ranges) == 0 or scan.time <= context.get_discrete_state(self._last).GetAtIndex(
-            0
+        if (
+            scan.time <= context.get_discrete_state(self._last).GetAtIndex(0)
+            or scan.valid.sum() < 10
         ):
-            return
-        slam = state.get_mutable_abstract_state(self._slam).get_value()
-        a, r = scan.angles, scan.ranges
-        v = scan.valid
-        pts = np.column_stack([r[v] * np.cos(a[v]), r[v] * np.sin(a[v])])
-        slam.process(pts, r, a, scan.time)
+            return  # already seen, or the sensor's empty message before its first sweep
+        state.get_mutable_abstract_state(self._slam).get_value().process_scan(scan)
         state.get_mutable_discrete_state(self._last).SetAtIndex(0, scan.time)
 
     def _background(self, context, state):
-        state.get_mutable_abstract_state(self._slam).get_value().optimise_pending()
+        state.get_mutable_abstract_state(self._slam).get_value().background()
 
     def _calc_pose(self, context, output):
-        sensor = self.slam(context).pose
-        output.SetFromVector(compose(sensor, between(self._mount, np.zeros(3))))
+        output.SetFromVector(
+            compose(self.slam(context).sensor_pose, between(self._mount, np.zeros(3)))
+        )
 
     def _calc_cov(self, context, output):
-        slam = self.slam(context)
-        cons = [c for c in slam.constraints if c.kind == "consecutive"]
-        cov = cons[-1].cov if cons else np.diag(np.square(slam.cfg.min_sigma))
-        output.SetFromVector(cov.ravel())
+        output.SetFromVector(np.asarray(self.slam(context).pose_covariance(), float).ravel())
 
     def _calc_map(self, context, value):
-        value.set_value(self.slam(context).map.to_occupancy_grid())
+        value.set_value(self.slam(context).occupancy())
+
+
+class HectorSlam(LidarSlam2D):
+    """The Hector-style SLAM of 003 (Kohlbrecher et al. 2011: multi-resolution scan-to-map
+    Gauss-Newton, no odometry) behind the same ports as :class:`LidarSlam2D`."""
+
+    def __init__(self, cfg: HectorConfig, initial_pose, mount, period: float):
+        super().__init__(
+            GraphSlamConfig(),
+            initial_pose,
+            mount,
+            period,
+            backend=lambda pose: make_hector(cfg, pose),
+        )
