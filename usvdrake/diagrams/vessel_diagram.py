@@ -67,6 +67,11 @@ def build_vessel_diagram(
             builder.Connect(
                 autonomy.GetOutputPort("predicted_trajectory"), pred.GetInputPort("trajectory")
             )
+        if autonomy.HasOutputPort("slam_map"):
+            from usvdrake.viz.occupancy_visualizer import OccupancyVisualizer
+
+            slam_map = builder.AddNamedSystem("slam_map_visualizer", OccupancyVisualizer(meshcat))
+            builder.Connect(autonomy.GetOutputPort("slam_map"), slam_map.GetInputPort("map"))
         if viz_cfg.lidar_hits:
             for port, name, cfg, three_d in (
                 ("lidar_scan", "lidar_2d", scenario.sensors.lidar2d, False),
