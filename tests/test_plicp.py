@@ -3,29 +3,11 @@
 import numpy as np
 from scipy.optimize import least_squares
 
-from usvdrake.sensors.raycast import ColumnLayout, Scene, cast
+from usvdrake.sensors.raycast import Scene, cast
 from usvdrake.systems.slam.censi_covariance import plicp_covariance, plicp_hessians
 from usvdrake.systems.slam.plicp import line_normals, plicp, rot, solve_point_to_line
-from usvdrake.worlds import box, cylinder
-
-HOKUYO = ColumnLayout(np.deg2rad(-135.0), np.deg2rad(0.25), 1081)  # 270°, 0.25°
-
-
-def cluttered_room() -> Scene:
-    solids = [
-        box("wall", 0, 7, 24, 0.3, 0, -1, 3),
-        box("wall", 0, -7, 24, 0.3, 0, -1, 3),
-        box("wall", 12, 0, 0.3, 14, 0, -1, 3),
-        box("wall", -12, 0, 0.3, 14, 0, -1, 3),
-        box("boat", 5, 3, 3, 1.2, 0.4, -1, 2),
-        box("boat", -6, -3, 4, 1.5, -0.7, -1, 2),
-        box("quay", 7, -4, 2, 2, 0.2, -1, 2),
-        box("boat", -1, 5.5, 2.5, 0.8, 0.0, -1, 2),
-        cylinder("post", -3, 4, 0.3, -1, 3),
-        cylinder("post", 2, -4.5, 0.5, -1, 3),
-        cylinder("post", -8, 2, 0.4, -1, 3),
-    ]
-    return Scene.from_solids(solids)
+from usvdrake.worlds import box
+from usvdrake.worlds.synthetic import HOKUYO, cluttered_room
 
 
 def corridor() -> Scene:

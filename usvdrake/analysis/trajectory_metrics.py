@@ -148,20 +148,26 @@ def as_trajectory(x) -> Trajectory:
 # --- TUM files -------------------------------------------------------------------------------
 
 
-def read_tum(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Timestamps (n,) [s], positions (n × 3) [m] and quaternions (n × 4, x y z w) of a TUM
-    trajectory file (``t x y z qx qy qz qw`` per line; ``#`` comments and blank lines
-    skipped; commas accepted as separators, as some tools write them)."""
+def _read_columns(path, n: int) -> np.ndarray:
+    """Rows of ``n`` numbers (space- or comma-separated; ``#`` comments and blank lines
+    skipped) as an (m × n) array; a row with another count raises ValueError naming the file."""
     rows = []
     with open(path) as f:
         for line in f:
             line = line.split("#", 1)[0].replace(",", " ").strip()
             if line:
                 values = line.split()
-                if len(values) != 8:
-                    raise ValueError(f"{path}: expected 8 columns, got {len(values)}: {line!r}")
+                if len(values) != n:
+                    raise ValueError(f"{path}: expected {n} columns, got {len(values)}: {line!r}")
                 rows.append([float(v) for v in values])
-    data = np.array(rows, dtype=float).reshape(-1, 8)
+    return np.array(rows, dtype=float).reshape(-1, n)
+
+
+def read_tum(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Timestamps (n,) [s], positions (n × 3) [m] and quaternions (n × 4, x y z w) of a TUM
+    trajectory file (``t x y z qx qy qz qw`` per line; ``#`` comments and blank lines
+    skipped; commas accepted as separators, as some tools write them)."""
+    data = _read_columns(path, 8)
     return data[:, 0].copy(), data[:, 1:4].copy(), data[:, 4:8].copy()
 
 
@@ -404,16 +410,7 @@ def read_relations(path: str | Path) -> Relations:
     """A ``*.relations`` file (Kümmerle et al. 2009): one ``t1 t2 x y z roll pitch yaw`` line per
     relation, the true pose at t2 in the frame of the pose at t1 [s, m, rad]; ``#`` comments
     and blank lines skipped."""
-    rows = []
-    with open(path) as f:
-        for line in f:
-            line = line.split("#", 1)[0].strip()
-            if line:
-                values = line.split()
-                if len(values) != 8:
-                    raise ValueError(f"{path}: expected 8 columns, got {len(values)}: {line!r}")
-                rows.append([float(v) for v in values])
-    data = np.array(rows, dtype=float).reshape(-1, 8)
+    data = _read_columns(path, 8)
     return Relations(
         data[:, 0].copy(), data[:, 1].copy(), se3_from_xyz_rpy(data[:, 2:5], data[:, 5:8])
     )
