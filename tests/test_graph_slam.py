@@ -111,3 +111,19 @@ def test_lidar_slam_system_in_a_diagram():
     assert np.hypot(*(pose[:2] - truth[:2])) < 0.2
     assert d.GetOutputPort("slam_map").Eval(ctx).data.shape == (625, 600)
     assert np.all(np.isfinite(d.GetOutputPort("slam_covariance").Eval(ctx)))
+
+
+def test_final_trajectory_has_every_scan_and_copies_keep_their_own(noisy_loop):
+    """The re-anchored (final) trajectory has one pose per scan, is as accurate as the online
+    one here, and copies keep their own anchor records."""
+    slam, est, truth = noisy_loop
+    t, poses = slam.final_trajectory()
+    assert len(t) == len(est)
+    e_final = np.hypot(poses[:, 0] - truth[:, 0], poses[:, 1] - truth[:, 1])
+    e_online = np.hypot(est[:, 0] - truth[:, 0], est[:, 1] - truth[:, 1])
+    assert np.sqrt(np.mean(e_final**2)) < 0.02 and np.sqrt(np.mean(e_online**2)) < 0.02
+    a, b = copy.deepcopy(slam), copy.deepcopy(slam)
+    a._record(1e6)
+    b._record(2e6)
+    assert a.final_trajectory()[0][-1] == 1e6 and b.final_trajectory()[0][-1] == 2e6
+    assert len(slam.final_trajectory()[0]) == len(est)

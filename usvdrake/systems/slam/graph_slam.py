@@ -79,6 +79,14 @@ def between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     )
 
 
+class _AppendLog:
+    """An append-only list shared by copies of a :class:`GraphSlam`; each copy remembers how
+    many entries are its own and forks the list if another copy appended first."""
+
+    def __init__(self, items=None):
+        self.items = [] if items is None else items
+
+
 @dataclass
 class Node:
     pose: np.ndarray  # (x, y, θ) in the map frame
@@ -119,6 +127,7 @@ class GraphSlam:
             "failed_matches": 0,
         }
         self.full_pending = False
+        self._anchors, self._n_anchors = _AppendLog(), 0  # (time, node, pose relative to it)
         self._robust = gtsam_barron(cfg.alpha, cfg.c)
 
     # --- per scan -----------------------------------------------------------------------------
@@ -132,6 +141,7 @@ class GraphSlam:
             return self.pose.copy()
         if not self.nodes:
             self._add_node(self.pose.copy(), points, ranges, angles, t)
+            self._record(t)
             self.stats["tracking_ms"].append((time.perf_counter() - t0) * 1e3)
             return self.pose.copy()
         last = self.nodes[-1]
@@ -162,8 +172,24 @@ class GraphSlam:
                 else None
             )
             self._new_node(points, ranges, angles, t, rel, cov)
+        self._record(t)
         self.stats["tracking_ms"].append((time.perf_counter() - t0) * 1e3)
         return self.pose.copy()
+
+    def _record(self, t: float) -> None:
+        if len(self._anchors.items) != self._n_anchors:  # another copy appended: fork
+            self._anchors = _AppendLog(self._anchors.items[: self._n_anchors])
+        self._anchors.items.append((t, len(self.nodes) - 1, self._rel.copy()))
+        self._n_anchors += 1
+
+    def final_trajectory(self) -> tuple[np.ndarray, np.ndarray]:
+        """(times, poses n × 3) of every tracked scan, re-expressed from its node's current
+        (optimised) pose — the SLAM's final trajectory estimate, as benchmarks score it."""
+        items = self._anchors.items[: self._n_anchors]
+        if not items:
+            return np.zeros(0), np.zeros((0, 3))
+        t = np.array([i[0] for i in items])
+        return t, np.array([compose(self.nodes[k].pose, rel) for _, k, rel in items])
 
     def _covariance(self, ref, cur, res) -> np.ndarray:
         try:
