@@ -113,6 +113,7 @@ def test_azimuth_vessels_are_refused_clearly():
         NmpcProblem(load_vessel("ntnu_round"), NmpcConfig())
 
 
+@pytest.mark.filterwarnings("ignore:invalid value encountered:RuntimeWarning")  # NaN on purpose
 def test_non_finite_inputs_fail_cleanly_instead_of_aborting():
     """Drake aborts the process on NaN coefficients; the problem must refuse them first."""
     p = NmpcProblem(VESSEL, NmpcConfig())
