@@ -27,3 +27,76 @@ def test_slam2d_cli_runs_a_real_log_piece(tmp_path):
 def test_slam2d_missing_log_is_one_line(tmp_path, capsys):
     assert main(["slam2d", str(tmp_path / "nope.clf"), "--out", str(tmp_path)]) == 2
     assert "no such file" in capsys.readouterr().err
+
+
+def write_bag(path: Path, n: int = 40) -> np.ndarray:
+    """A ROS 1 bag of Hokuyo scans cast while moving through the synthetic room (the truth)."""
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    from usvdrake.sensors.raycast import cast
+    from usvdrake.worlds.synthetic import HOKUYO, cluttered_room
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    scan_t, header_t, time_t = (
+        store.types[k]
+        for k in ("sensor_msgs/msg/LaserScan", "std_msgs/msg/Header", "builtin_interfaces/msg/Time")
+    )
+    scene = cluttered_room()
+    truth = np.column_stack(
+        [np.linspace(-4.0, 4.0, n), np.linspace(-1.0, 1.0, n), np.linspace(0.0, 0.4, n)]
+    )
+    with Writer(path) as writer:
+        conn = writer.add_connection("/scan", scan_t.__msgtype__, typestore=store)
+        for k, (x, y, psi) in enumerate(truth):
+            r = cast(scene, HOKUYO, [0.0], np.array([x, y]), 1.0, psi, 30.0)[0]
+            stamp = time_t(sec=100 + k, nanosec=0)
+            msg = scan_t(
+                header=header_t(seq=k, stamp=stamp, frame_id="laser"),
+                angle_min=HOKUYO.az0,
+                angle_max=HOKUYO.az0 + HOKUYO.daz * (HOKUYO.count - 1),
+                angle_increment=HOKUYO.daz,
+                time_increment=0.0,
+                scan_time=0.025,
+                range_min=0.1,
+                range_max=30.0,
+                ranges=np.where(np.isfinite(r), r, np.inf).astype(np.float32),
+                intensities=np.zeros(0, np.float32),
+            )
+            writer.write(conn, (100 + k) * 10**9, store.serialize_ros1(msg, scan_t.__msgtype__))
+    return truth
+
+
+def test_ros1_bag_scans_read_and_slam2d_tracks_them(tmp_path):
+    from usvdrake.logs.rosbag import read_bag_scans
+
+    bag = tmp_path / "room.bag"
+    truth = write_bag(bag)
+    scans = list(read_bag_scans(bag))
+    assert len(scans) == len(truth) and scans[3].timestamp == 103.0
+    assert scans[0].scan.valid.sum() > 1000 and np.all(
+        scans[0].scan.ranges[~scans[0].scan.valid] == np.inf
+    )
+    assert (
+        main(
+            ["slam2d", str(bag), "--out", str(tmp_path / "out"), "--quiet", "--resolution", "0.05"]
+        )
+        == 0
+    )
+    t, xyz, quat = read_tum(tmp_path / "out" / "trajectory.tum")
+    # the SLAM frame is the first scan's: compare the motion relative to the first pose
+    rel_true = truth[:, :2] - truth[0, :2]
+    c, s = np.cos(-truth[0, 2]), np.sin(-truth[0, 2])
+    rel_true = rel_true @ np.array([[c, s], [-s, c]])
+    assert np.max(np.hypot(*(xyz[:, :2] - rel_true).T)) < 0.02
+
+
+def test_bag_without_laser_scans_is_one_clear_line(tmp_path):
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    bag = tmp_path / "empty.bag"
+    with Writer(bag) as writer:
+        writer.add_connection("/chatter", "std_msgs/msg/String", typestore=store)
+    assert main(["slam2d", str(bag), "--out", str(tmp_path / "o")]) == 2

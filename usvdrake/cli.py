@@ -209,8 +209,10 @@ def make_parser() -> argparse.ArgumentParser:
     d.add_argument("--trials", type=int, default=5)
     d.add_argument("--duration", type=float, default=150.0, help="nominal trial length [s]")
     d.set_defaults(func=cmd_identify_data)
-    m = sub.add_parser("slam2d", help="2D graph SLAM (002) on a recorded CARMEN log, scan only")
-    m.add_argument("log", help="CARMEN .clf/.log (plain, gzip or bzip2)")
+    m = sub.add_parser("slam2d", help="2D graph SLAM (002) on recorded scans, scan only")
+    m.add_argument(
+        "log", help="CARMEN .clf/.log (plain, gzip or bzip2), ROS 1 .bag or ROS 2 bag folder"
+    )
     m.add_argument("--out", default="out/slam2d", help="output folder")
     m.add_argument("--reference", default=None, help="a log whose poses are ground truth (ATE)")
     m.add_argument("--resolution", type=float, default=0.1, help="map cell size [m]")

@@ -1,4 +1,4 @@
-"""Offline 2D SLAM on recorded scans (``usvdrake slam2d``): CARMEN logs for now.
+"""Offline 2D SLAM on recorded scans (``usvdrake slam2d``): CARMEN logs and ROS 1/2 bags.
 
 Scan-only (no odometry, as 002's system runs): every scan goes through :class:`GraphSlam`; the
 output trajectory is every scan's pose re-expressed from its node after the last optimisation,
@@ -47,25 +47,30 @@ def run_slam2d(
     max_scans: int | None = None,
     progress: bool = True,
 ) -> dict:
-    """Run the graph SLAM on a CARMEN log; write trajectory.tum, map.png, metrics.json."""
+    """Run the graph SLAM on a CARMEN log or a ROS bag; write trajectory.tum, map.png,
+    metrics.json."""
     from usvdrake.analysis.trajectory_metrics import ate, trajectory_from_planar, write_tum
+    from usvdrake.logs.rosbag import is_bag, read_bag_scans
     from usvdrake.typed_yaml import ConfigError
 
     log = Path(log)
-    if not log.is_file():
-        raise ConfigError(
-            log, "", "a CARMEN log file (.clf/.log, plain, gzip or bzip2)", "no such file"
-        )
-    scans = list(read_carmen(log))
+    if is_bag(log):
+        scans = list(read_bag_scans(log))
+    elif log.is_file():
+        scans = list(read_carmen(log))
+    else:
+        raise ConfigError(log, "", "a CARMEN log (.clf/.log) or a ROS 1/2 bag", "no such file")
     if max_scans:
         scans = scans[:max_scans]
     if not scans:
-        raise ConfigError(log, "", "FLASER scans", "none")
+        raise ConfigError(log, "", "laser scans", "none")
+    # the sensor's own range (CARMEN logs: 50 m; no-returns are beyond it)
+    max_range = min(50.0, max(float(rec.scan.range_max) or 50.0 for rec in scans))
     cfg = GraphSlamConfig(
         map_resolution=resolution,
         map_origin=[-100.0, -100.0],
         map_size=[200.0, 200.0],
-        max_range=50.0,
+        max_range=max_range,
     )
     wall0 = time.perf_counter()
     stamps, poses, slam = run_graph_slam(scans, cfg, progress)
