@@ -96,6 +96,30 @@ def run_mission(
     }
     for name, logger in loggers.items():
         logger.set_name(f"log_{name}")
+    log_writer = None
+    if out_dir is not None:
+        from usvdrake.logs.mission_log import MissionLogWriter, MissionRecorder
+
+        Path(out_dir).mkdir(parents=True, exist_ok=True)
+        log_writer = MissionLogWriter(Path(out_dir) / "log.mcap")
+        scan_period = None
+        if vessel_diagram.HasOutputPort("lidar_scan"):
+            from usvdrake.sensors.lidar_model import preset_by_name
+
+            lidar = scenario.sensors.lidar2d
+            scan_period = 1.0 / (lidar.rate_hz or preset_by_name(lidar.preset).rate_hz)
+        recorder = builder.AddNamedSystem(
+            "mission_recorder",
+            MissionRecorder(log_writer, scenario.visualization.rate_hz, scan_period),
+        )
+        builder.Connect(
+            vessel_diagram.GetOutputPort("ground_truth_state"),
+            recorder.GetInputPort("ground_truth_state"),
+        )
+        if scan_period is not None:
+            builder.Connect(
+                vessel_diagram.GetOutputPort("lidar_scan"), recorder.GetInputPort("lidar_scan")
+            )
     diagram = builder.Build()
     diagram.set_name("mission")
 
@@ -148,6 +172,8 @@ def run_mission(
     wall = time.perf_counter() - wall0
     if bar is not None:
         bar.close()
+    if log_writer is not None:
+        log_writer.close()
 
     if meshcat is not None:
         viz = vessel_diagram.GetSubsystemByName("vessel_visualizer")
@@ -240,5 +266,7 @@ def run_mission(
             metrics=out / "metrics.json",
             report=out / "report.html",
             trajectory=out / "ground_truth.tum",
+            diagram=out / "diagram.dot",
+            log=out / "log.mcap",
         )
     return result

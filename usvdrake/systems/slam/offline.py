@@ -54,12 +54,18 @@ def run_slam2d(
     from usvdrake.typed_yaml import ConfigError
 
     log = Path(log)
-    if is_bag(log):
+    if log.suffix == ".mcap":
+        from usvdrake.logs.mission_log import read_log_scans
+
+        scans = read_log_scans(log)
+    elif is_bag(log):
         scans = list(read_bag_scans(log))
     elif log.is_file():
         scans = list(read_carmen(log))
     else:
-        raise ConfigError(log, "", "a CARMEN log (.clf/.log) or a ROS 1/2 bag", "no such file")
+        raise ConfigError(
+            log, "", "a CARMEN log, a ROS 1/2 bag or a usvdrake .mcap", "no such file"
+        )
     if max_scans:
         scans = scans[:max_scans]
     if not scans:
@@ -102,7 +108,13 @@ def run_slam2d(
         "realtime_factor": duration / wall if wall > 0 else 0.0,
     }
     if reference is not None:
-        t_ref, p_ref = read_poses(reference)
+        if Path(reference).suffix == ".mcap":
+            from usvdrake.logs.mission_log import read_log_states
+
+            t_ref, states = read_log_states(reference)
+            p_ref = states[:, :3]
+        else:
+            t_ref, p_ref = read_poses(reference)
         result = ate(
             trajectory_from_planar(stamps, poses),
             trajectory_from_planar(t_ref, p_ref),
