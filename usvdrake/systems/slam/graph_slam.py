@@ -32,6 +32,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from usvdrake.systems.slam.censi_covariance import plicp_covariance
+from usvdrake.systems.slam.correlative import correlative_search
 from usvdrake.systems.slam.occupancy_mapping import LogOddsGrid
 from usvdrake.systems.slam.plicp import plicp
 from usvdrake.systems.slam.robust_kernel import gtsam_barron
@@ -43,9 +44,10 @@ class GraphSlamConfig:
     node_rotation: float = 0.17  # [rad] (~10°) likewise
     window: int = 15  # [nodes] optimised together on each new node
     link_radius: float = 4.0  # [m] dense links to window nodes within this distance
-    max_link_residual: float = (
-        0.15  # [m] RMS point-to-line error that accepts a match (≥ the range noise)
-    )
+    max_link_residual: float = 0.15  # [m] RMS point-to-line error accepting a match (≥ noise)
+    # a tracking match whose residual exceeds this many max_link_residual is re-seeded by a
+    # correlative search (Olson 2009); lower = more robust to large motions, slower
+    correlative_trigger: float = 2.0
     min_link_points: int = 40  # correspondences a match needs
     loop_index_gap: int = 40  # [nodes] index difference that makes a loop candidate
     loop_radius: float = 6.0  # [m] distance that makes a loop candidate
@@ -147,11 +149,12 @@ class GraphSlam:
         last = self.nodes[-1]
         guess = compose(self._rel, self._last_step)  # constant velocity
         res = plicp(last.points, points, initial=tuple(guess), tree=last.tree)
-        if not res.converged or res.residual > self.cfg.max_link_residual:
-            # a poor match from the constant-velocity guess: retry with the rotation search
-            retry = plicp(
-                last.points, points, initial=tuple(guess), tree=last.tree, rotation_search=True
-            )
+        trigger = self.cfg.correlative_trigger * self.cfg.max_link_residual
+        if res.n_valid < self.cfg.min_link_points or res.residual > trigger:
+            # a failed match from the constant-velocity guess: seed PLICP by a correlative search
+            # over rotations × translations (Olson 2009) and keep the better of the two
+            seed, _ = correlative_search(last.points, points, guess)
+            retry = plicp(last.points, points, initial=tuple(seed), tree=last.tree)
             if retry.n_valid >= self.cfg.min_link_points and retry.residual < res.residual:
                 res = retry
         if res.n_valid < self.cfg.min_link_points or not np.isfinite(res.theta):
