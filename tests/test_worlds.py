@@ -5,7 +5,7 @@ import pytest
 import shapely
 
 from usvdrake.worlds import available_worlds, make_world
-from usvdrake.worlds.canal import Canal, _arc, _radial, canal_network
+from usvdrake.worlds.canal import amsterdam_canal_lines, canal_network, centre_line_length
 
 
 @pytest.fixture(scope="module")
@@ -32,11 +32,7 @@ def test_amsterdam_has_what_000_describes(amsterdam):
 
 
 def test_centre_line_length():
-    canals = [Canal(_arc(250.0, 200.0, 340.0), 20.0), Canal(_arc(330.0, 200.0, 340.0), 20.0)]
-    canals += [Canal(_radial(a, 240.0, 340.0), 14.0) for a in (200.0, 250.0, 340.0)]
-    canals += [Canal(_radial(292.0, 170.0, 720.0), 45.0)]
-    total = sum(shapely.LineString(c.centre_line).length for c in canals)
-    assert total >= 2000.0
+    assert centre_line_length(amsterdam_canal_lines()) >= 2000.0
 
 
 def test_gps_denied_under_every_bridge(amsterdam):

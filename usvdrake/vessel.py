@@ -5,7 +5,6 @@ The YAML files live in ``usvdrake/vessels/``; ``load_vessel("roboat2")`` reads o
 NED-style matrices are converted once, in the YAML comments and in ``thrusters.py``.
 """
 
-import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -95,10 +94,3 @@ def load_vessel(name_or_path: str | Path) -> VesselParams:
     """Load a shipped vessel by name (``roboat2``, ``usv2000``, ``ntnu_round``) or a YAML path."""
     path = resolve_yaml("vessel", name_or_path, VESSEL_DIR)
     return _validate(load_typed(VesselParams, path), path)
-
-
-def replace_hydrodynamics(params: VesselParams, **changes: float) -> VesselParams:
-    """A copy of ``params`` with some of ξ changed (the original is never modified)."""
-    return dataclasses.replace(
-        params, hydrodynamics=dataclasses.replace(params.hydrodynamics, **changes)
-    )

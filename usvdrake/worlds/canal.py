@@ -233,13 +233,9 @@ def _radial(angle_deg: float, r0: float, r1: float) -> list[list[float]]:
     return [[r0 * np.cos(a), r0 * np.sin(a)], [r1 * np.cos(a), r1 * np.sin(a)]]
 
 
-def amsterdam_canals(seed: int = 0) -> World:
-    """A canal ring after Amsterdam's grachtengordel (000 §VI-A): two concentric arcs (radii
-    250 m and 330 m, 20 m wide, like Herengracht and Keizersgracht) joined by three radial
-    canals into closed loops, and a 45 m wide river (like the Amstel) crossing both for tracking
-    tests; 8 bridges, moored boats, facades 8-20 m tall. ~2.2 km of centre line. The local
-    frame's origin is the ring's centre."""
-    canals = [
+def amsterdam_canal_lines() -> list[Canal]:
+    """The centre lines of ``amsterdam_canals`` (origin at the ring's centre)."""
+    return [
         Canal(_arc(250.0, 200.0, 340.0), 20.0),  # inner ring canal
         Canal(_arc(330.0, 200.0, 340.0), 20.0),  # outer ring canal
         Canal(_radial(200.0, 240.0, 340.0), 14.0),  # radial canals closing the loops
@@ -247,6 +243,15 @@ def amsterdam_canals(seed: int = 0) -> World:
         Canal(_radial(340.0, 240.0, 340.0), 14.0),
         Canal(_radial(292.0, 170.0, 720.0), 45.0),  # the river
     ]
+
+
+def amsterdam_canals(seed: int = 0) -> World:
+    """A canal ring after Amsterdam's grachtengordel (000 §VI-A): two concentric arcs (radii
+    250 m and 330 m, 20 m wide, like Herengracht and Keizersgracht) joined by three radial
+    canals into closed loops, and a 45 m wide river (like the Amstel) crossing both for tracking
+    tests; 8 bridges, moored boats, facades 8-20 m tall. ~2.2 km of centre line. The local
+    frame's origin is the ring's centre."""
+    canals = amsterdam_canal_lines()
     inner, outer = np.deg2rad(1.0) * 250.0, np.deg2rad(1.0) * 330.0  # arc length per degree
     bridges = [
         (0, 30 * inner),
@@ -270,4 +275,5 @@ def amsterdam_canals(seed: int = 0) -> World:
 
 
 def centre_line_length(world_canals: list[Canal]) -> float:
+    """Total centre-line length [m] of a canal network."""
     return float(sum(shapely.LineString(c.centre_line).length for c in world_canals))

@@ -92,17 +92,3 @@ def prism(kind: str, polygon, z_min: float, z_max: float, cut=None) -> Solid:
         polygon=p,
         cut=None if cut is None else tuple(map(float, cut)),
     )
-
-
-def box_parameters(solid: Solid) -> tuple[float, float, float, float, float]:
-    """(x, y, lx, ly, yaw) of a footprint made by :func:`box` (for drawing it as a box)."""
-    p = solid.polygon
-    c = p.mean(axis=0)
-    ex, ey = p[0] - p[3], p[1] - p[0]  # the box's own +x and +y edges
-    return (
-        float(c[0]),
-        float(c[1]),
-        float(np.linalg.norm(ex)),
-        float(np.linalg.norm(ey)),
-        float(np.arctan2(ex[1], ex[0])),
-    )

@@ -99,8 +99,3 @@ def extended_to_command(thrusters: list[Thruster], z: np.ndarray) -> np.ndarray:
             out.append(float(z[k]))
             k += 1
     return np.array(out)
-
-
-def force_vectors(thrusters: list[Thruster], command) -> np.ndarray:
-    """Per-thruster body-frame force vectors (n × 2), for drawing arrows and for logs."""
-    return np.array([[f * np.cos(a), f * np.sin(a)] for f, a in split_command(thrusters, command)])
