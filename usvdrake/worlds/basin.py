@@ -80,7 +80,7 @@ def _passage_and_labyrinth(rng: np.random.Generator) -> tuple[list[Solid], float
     """The cross wall with the narrow passage (position B), lined by two boards, and behind it
     the labyrinth: cross walls alternately joined to the south and north walls, each leaving
     an opening at its other end, so the corridors form a serpentine. Returns the solids and the
-    x of the cross wall (the end of the middle section)."""
+    x of the cross wall (the end of the middle section) and the passage's water area."""
     x_b = rng.uniform(24.5, 26.0)
     w = rng.uniform(*PASSAGE_WIDTH)
     y_p = rng.uniform(1.2, WIDTH - 1.2 - w)  # south edge of the passage
@@ -98,7 +98,7 @@ def _passage_and_labyrinth(rng: np.random.Generator) -> tuple[list[Solid], float
         solids.append(_board(x, 0.0, x, WIDTH - gap) if south else _board(x, gap, x, WIDTH))
         south = not south
         x += rng.uniform(*LABYRINTH_PITCH)
-    return solids, x_b
+    return solids, x_b, shapely.box(x_b, y_p, x_p, y_p + w)
 
 
 def _obstacle_group(kind: str, rng: np.random.Generator, x: float, y: float) -> list[Solid]:
@@ -129,7 +129,7 @@ def ntnu_basin(seed: int = 0) -> World:
     spacing vary with ``seed``; every part stays reachable from :data:`START`."""
     rng = np.random.default_rng(seed)
     solids = _basin_walls()
-    inner, x_b = _passage_and_labyrinth(rng)
+    inner, x_b, passage = _passage_and_labyrinth(rng)
     solids += inner
     placed = [shapely.Polygon(s.footprint()) for s in solids] + [shapely.Point(START)]
     for kind in ("boat", "boat", "plank", "plank", "mount", "mount", "mount"):
@@ -147,6 +147,7 @@ def ntnu_basin(seed: int = 0) -> World:
         solids=solids,
         water=shapely.box(0.0, 0.0, LENGTH, WIDTH),
         datum="trondheim",
+        regions={"narrow_passage": passage},
         description=(
             "NTNU MC-Lab basin 40 m x 6.45 m: sloped wave-generator end, camera mounts, vessels, "
             "planks with hinders, a narrow passage and a labyrinth"

@@ -52,6 +52,8 @@ class World:
     gps_denied: shapely.Geometry = field(default_factory=shapely.Polygon)  # no fix inside
     datum: str = "amsterdam"  # GPS datum of the local frame's origin
     description: str = ""
+    # Named areas for metrics, e.g. "narrow_passage" (003's position B) in ntnu_basin
+    regions: dict = field(default_factory=dict)
     _sky_cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
