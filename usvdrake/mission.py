@@ -13,6 +13,7 @@ from pydrake.systems.primitives import LogVectorOutput
 
 from usvdrake.analysis.metrics import (
     estimation_metrics,
+    exploration_metrics,
     mission_metrics,
     slam_metrics,
     tracking_metrics,
@@ -60,6 +61,36 @@ def _write_tum(path: Path, times: np.ndarray, states: np.ndarray) -> None:
     np.savetxt(path, rows, fmt="%.6f", header="t x y z qx qy qz qw")
 
 
+def _exploration_summary(scenario, vessel, world, autonomy, context, logs) -> dict:
+    """003's exploration metrics (:func:`exploration_metrics`) on the final SLAM map, with the
+    time the explorer declared the exploration finished and which map and pose it used."""
+    slam_sys = autonomy.GetSubsystemByName("lidar_slam_2d")
+    final_map = slam_sys.GetOutputPort("slam_map").Eval(slam_sys.GetMyContextFromRoot(context))
+    status_log = logs["explorer_status"]
+    status = status_log.data().T
+    done = np.flatnonzero(status[:, 2] > 0)
+    finished_time = float(status_log.sample_times()[done[0]]) if len(done) else None
+    times = logs["ground_truth_state"].sample_times()
+    states = logs["ground_truth_state"].data().T
+    out = exploration_metrics(
+        times,
+        states,
+        vessel,
+        world,
+        final_map,
+        scenario.exploration.explorer.resolution,
+        finished_time,
+    )
+    out.update(
+        map_source=f"slam:{scenario.slam.method}",
+        pose_source="passive_observer(slam_pose)"
+        if scenario.estimator == "observer"
+        else "ground_truth",
+        planning_cycles=int(status[-1, 3]) if len(status) else 0,
+    )
+    return out
+
+
 def run_mission(
     scenario: Scenario,
     out_dir: str | Path | None = None,
@@ -87,7 +118,7 @@ def run_mission(
     logged = ["ground_truth_state", "reference", "thrust_applied", "state_estimate"]
     logged += [
         p
-        for p in ("pose_measurement", "nmhe_solve_ms", "slam_pose")
+        for p in ("pose_measurement", "nmhe_solve_ms", "slam_pose", "explorer_status")
         if vessel_diagram.HasOutputPort(p)
     ]
     loggers = {
@@ -235,6 +266,9 @@ def run_mission(
         slam_sys = autonomy.GetSubsystemByName("lidar_slam_2d")
         slam = slam_sys.slam(slam_sys.GetMyContextFromRoot(context))
         metrics.update(slam_metrics(times, states, logs["slam_pose"].data().T, slam))
+
+    if autonomy.HasSubsystemNamed("frontier_explorer"):
+        metrics.update(_exploration_summary(scenario, vessel, world, autonomy, context, logs))
 
     result = MissionResult(metrics, times, states, reference, thrust)
     if out_dir is not None:

@@ -17,7 +17,11 @@ from usvdrake.sensors.lidar_model import LIDAR_PRESETS, LidarConfig
 from usvdrake.sensors.pose_sensor import PoseSensorConfig
 from usvdrake.sensors.thrust_sensor import ThrustSensorConfig
 from usvdrake.systems.control.nmpc_problem import NmpcConfig
+from usvdrake.systems.control.pd_controller import PdControllerConfig
+from usvdrake.systems.control.reference_model import ReferenceModelConfig
 from usvdrake.systems.estimation.nmhe_problem import NmheConfig
+from usvdrake.systems.guidance.frontier_explorer import ExplorerConfig
+from usvdrake.systems.guidance.operator import OperatorCommandConfig, parse_mode
 from usvdrake.systems.slam.graph_slam import GraphSlamConfig
 from usvdrake.systems.slam.hector import HectorConfig
 from usvdrake.typed_yaml import ConfigError, get_dotted, load_typed, resolve_yaml
@@ -25,8 +29,8 @@ from usvdrake.vessel import VESSEL_DIR, available_vessels
 
 SCENARIO_DIR = Path(__file__).parent / "scenarios"
 DEFAULT_SCENARIO = "canal_demo"
-ESTIMATORS = ("oracle", "nmhe")  # SLAM estimators arrive with their issues
-CONTROLLERS = ("baseline", "nmpc")
+ESTIMATORS = ("oracle", "nmhe", "observer")
+CONTROLLERS = ("baseline", "nmpc", "explore")
 
 
 @dataclass
@@ -132,6 +136,35 @@ class SlamConfig:
 
 
 @dataclass
+class ObserverSettings:
+    """003's nonlinear passive observer (Fossen 2011 §11.4.1) on the SLAM pose in calm water
+    (no wave filter); the gains follow from the cut-offs by
+    :func:`usvdrake.systems.control.passive_observer.fossen_gains`."""
+
+    cutoff: list[float] = field(default_factory=lambda: [2.0, 2.0, 3.0])  # [rad/s] ω_c = K2
+    bias_time_constant: float = 1000.0  # [s] T: the bias is a slowly varying force
+    rate_hz: float = 20.0  # [Hz] observer update rate (RK4 substeps between updates)
+
+
+@dataclass
+class ExplorationConfig:
+    """003's autonomous exploration: frontier explorer + weighted A* + velocity-setpoint law +
+    reference model + PD controller + thrust allocation (controller ``explore``)."""
+
+    explorer: ExplorerConfig = field(default_factory=ExplorerConfig)
+    setpoint_rate_hz: float = 10.0  # [Hz] the velocity-setpoint law (faster than the planner)
+    reference: ReferenceModelConfig = field(
+        default_factory=lambda: ReferenceModelConfig(omega=0.3, zeta=1.0, v_max=0.3, a_max=0.1)
+    )
+    pd: PdControllerConfig = field(default_factory=PdControllerConfig)
+    observer: ObserverSettings = field(default_factory=ObserverSettings)
+    # Scripted operator actions (003 §Operator Interaction), e.g.
+    # [{time: 120, mode: goto, goal: [10, 3]}, {time: 200, mode: explore}]
+    commands: list[OperatorCommandConfig] = field(default_factory=list)
+    operator_controls: bool = True  # Meshcat buttons and goal sliders when a Meshcat is live
+
+
+@dataclass
 class Scenario:
     name: str = ""  # short identifier (defaults to the file name)
     description: str = ""  # one line for humans
@@ -148,6 +181,8 @@ class Scenario:
     # 000 tracking an A* reference through the waypoints (goals in sequence) at mission.speed
     controller: str = "baseline"
     slam: SlamConfig = field(default_factory=SlamConfig)
+    # "explore" (003): the vessel maps the world by itself; needs slam.method hector or graph
+    exploration: ExplorationConfig = field(default_factory=ExplorationConfig)
     nmpc: NmpcConfig = field(default_factory=NmpcConfig)
     sensors: SensorsConfig = field(default_factory=SensorsConfig)
     environment: EnvironmentConfig = field(default_factory=EnvironmentConfig)
@@ -198,6 +233,49 @@ def available_scenarios() -> list[str]:
 def _positive(file, key, value):
     if not value > 0:
         raise ConfigError(file, key, "a positive number", repr(value))
+
+
+def _validate_exploration(s: Scenario, file) -> None:
+    if s.slam.method == "none":
+        raise ConfigError(
+            file, "slam.method", "'hector' or 'graph' (exploration maps as it goes)", "'none'"
+        )
+    if s.estimator not in ("observer", "oracle"):
+        raise ConfigError(
+            file, "estimator", "'observer' or 'oracle' with controller explore", repr(s.estimator)
+        )
+    e = s.exploration
+    for key in (
+        "explorer.resolution",
+        "explorer.planning_period",
+        "setpoint_rate_hz",
+        "observer.rate_hz",
+        "observer.bias_time_constant",
+        "pd.rate_hz",
+    ):
+        _positive(file, f"exploration.{key}", get_dotted(e, key))
+    for key in ("observer.cutoff", "pd.omega_n", "pd.zeta"):
+        v = get_dotted(e, key)
+        if len(v) != 3 or min(v) <= 0:
+            raise ConfigError(file, f"exploration.{key}", "3 positive numbers", repr(v))
+    for key in ("explorer.inflation", "explorer.near_free_radius", "explorer.visited_radius"):
+        if get_dotted(e, key) < 0:
+            raise ConfigError(file, f"exploration.{key}", "a number >= 0", repr(get_dotted(e, key)))
+    if e.explorer.connection_distance not in (1, 2, 3, 4):
+        raise ConfigError(
+            file,
+            "exploration.explorer.connection_distance",
+            "1, 2, 3 or 4",
+            repr(e.explorer.connection_distance),
+        )
+    for i, c in enumerate(e.commands):
+        key = f"exploration.commands[{i}]"
+        try:
+            mode = parse_mode(c.mode)
+        except ValueError:
+            raise ConfigError(file, f"{key}.mode", "explore, goto or stop", repr(c.mode)) from None
+        if mode.name == "GOTO" and len(c.goal) != 2:
+            raise ConfigError(file, f"{key}.goal", "[x, y] for goto", f"{len(c.goal)} numbers")
 
 
 def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
@@ -254,7 +332,9 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
             "'pose' in the list (the NMHE measures it)",
             repr(s.sensors.enabled),
         )
-    if not s.mission.waypoints:
+    if s.controller == "explore":
+        _validate_exploration(s, file)
+    elif not s.mission.waypoints:
         raise ConfigError(file, "mission.waypoints", "at least one [x, y] waypoint", "none")
     for i, wp in enumerate(s.mission.waypoints):
         if len(wp) != 2:

@@ -30,14 +30,17 @@ def mission_metrics(
     for t in vessel.thrusters:
         limits += [t.max_force, np.inf] if t.azimuth else [max(t.max_force, -t.min_force)]
     saturated = np.any(np.abs(thrust) >= 0.99 * np.asarray(limits), axis=1)
-    goal = np.asarray(waypoints, float)[-1]
+    goals = np.asarray(waypoints, float).reshape(-1, 2)
     return {
         "path_length_m": path_length(xy),
         "mean_speed_mps": float(np.mean(speed)),
         "max_speed_mps": float(np.max(speed)),
         "cross_track_rmse_m": float(np.sqrt(np.mean(reference[:, 2] ** 2))),
         "cross_track_max_m": float(np.max(np.abs(reference[:, 2]))),
-        "final_distance_to_goal_m": float(np.linalg.norm(xy[-1] - goal)),
+        # null without waypoints (exploration)
+        "final_distance_to_goal_m": float(np.linalg.norm(xy[-1] - goals[-1]))
+        if len(goals)
+        else None,
         # null when the world has no obstacles at the waterline
         "min_clearance_m": float(np.min(clearance)) if np.isfinite(np.min(clearance)) else None,
         "collision_samples": int(np.sum(clearance < 0.0)),
@@ -147,3 +150,83 @@ def slam_metrics(times: np.ndarray, states: np.ndarray, slam_poses: np.ndarray, 
         "optimisation_ms_max": float(np.max(opt)),
         "full_optimisation_ms_max": float(max(stats.get("full_optimisation_ms", []), default=0.0)),
     }
+
+
+OPEN_WATER_CLEARANCE = 2.1  # [m] 003 eq. (2): beyond this the look-ahead is at its 3 m maximum
+CONTACT_CLEARANCE = 0.1  # [m] the exploration issue counts a hull closer than this as a collision
+MOVING_SPEED = 0.02  # [m/s] below this the vessel is holding position, not travelling
+
+
+def explored_fraction(world: World, start_xy, final_map, resolution: float) -> dict:
+    """How much of the water the vessel could reach the final map has seen.
+
+    The reference is the ground-truth grid at ``resolution`` [m] (:meth:`World.occupancy`):
+    its free cells 8-connected to the start cell are the reachable free area. A cell counts as
+    explored when the map (an :class:`OccupancyGrid` in the world frame, coarsened to the same
+    resolution) marks it free or occupied at that position.
+    """
+    from scipy import ndimage
+
+    from usvdrake.systems.guidance.map_processing import EIGHT, coarsen
+
+    truth = world.occupancy(resolution, bounds=world.water.bounds)
+    free = truth.data == truth.FREE
+    r0, c0 = truth.to_cell(*np.asarray(start_xy, float)[:2])
+    labels, _ = ndimage.label(free, structure=EIGHT)
+    reachable = labels == labels[int(r0), int(c0)]
+    xs, ys = truth.cell_centres()
+    gx, gy = np.meshgrid(xs, ys)
+    known = np.zeros_like(reachable)
+    if final_map is not None and final_map.data.size:
+        grid = coarsen(final_map, resolution) if final_map.resolution < resolution else final_map
+        rows, cols = grid.to_cell(gx, gy)
+        inside = (rows >= 0) & (rows < grid.shape[0]) & (cols >= 0) & (cols < grid.shape[1])
+        known[inside] = grid.data[rows[inside], cols[inside]] != grid.UNKNOWN
+    n = int(reachable.sum())
+    return {
+        "reachable_free_area_m2": float(n * resolution**2),
+        "explored_area_m2": float((reachable & known).sum() * resolution**2),
+        "explored_fraction": float((reachable & known).sum() / n) if n else 0.0,
+    }
+
+
+def exploration_metrics(
+    times: np.ndarray,
+    states: np.ndarray,
+    vessel: VesselParams,
+    world: World,
+    final_map,
+    resolution: float,
+    finished_time: float | None,
+) -> dict:
+    """003's exploration run: coverage (:func:`explored_fraction`), safety (collisions =
+    episodes with the hull within 0.1 m of a solid) and the speeds of 003 Fig. 17: median
+    speed inside the world's ``narrow_passage`` region and median speed while travelling
+    (≥ 0.02 m/s) in open water, where the centre is ≥ 2.1 m from every solid (the full look-ahead
+    of eq. 2)."""
+    hull = vessel.hull
+    clearance = hull_clearance(world, states, hull.length, hull.beam, hull.height)
+    contact = clearance < CONTACT_CLEARANCE
+    episodes = int(np.sum(contact[1:] & ~contact[:-1]) + (contact[0] if len(contact) else 0))
+    speed = np.hypot(states[:, 3], states[:, 4])
+    centre = world.clearance(states[:, 0], states[:, 1], hull.height)
+    open_water = (centre >= OPEN_WATER_CLEARANCE) & (speed >= MOVING_SPEED)
+    out = explored_fraction(world, states[0, :2], final_map, resolution)
+    out.update(
+        collisions=episodes,
+        min_clearance_m=float(np.min(clearance)),
+        speed_open_mps=float(np.median(speed[open_water])) if open_water.any() else None,
+        open_water_samples=int(open_water.sum()),
+        exploration_finished=finished_time is not None,
+        exploration_time_s=float(finished_time) if finished_time is not None else None,
+    )
+    region = world.regions.get("narrow_passage")
+    if region is not None:
+        import shapely
+
+        inside = shapely.contains_xy(region, states[:, 0], states[:, 1])
+        out.update(
+            speed_narrow_mps=float(np.median(speed[inside])) if inside.any() else None,
+            narrow_passage_samples=int(inside.sum()),
+        )
+    return out

@@ -7,6 +7,7 @@ heading/speed law, constrained thrust allocation) or ``nmpc`` (000's NMPC tracki
 reference through the mission's goals, thruster forces straight out).
 """
 
+import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import PassThrough
 
@@ -30,8 +31,124 @@ def make_reference(scenario: Scenario, world: World):
     )
 
 
-def make_autonomy(scenario: Scenario, vessel: VesselParams, world: World) -> Diagram:
+def _add_slam(builder: DiagramBuilder, scenario: Scenario):
+    """The 2D SLAM on the exported ``lidar_scan``; its ports exported, the system returned."""
+    from usvdrake.sensors.lidar_model import preset_by_name
+    from usvdrake.systems.slam.lidar_slam2d import HectorSlam, LidarSlam2D
+
+    lidar = scenario.sensors.lidar2d
+    period = 1.0 / (lidar.rate_hz or preset_by_name(lidar.preset).rate_hz)
+    start = scenario.initial_state[:3]
+    if scenario.slam.method == "graph":
+        slam = LidarSlam2D(scenario.slam.graph, start, lidar.mount, period)
+    else:
+        slam = HectorSlam(scenario.slam.hector, start, lidar.mount, period)
+    slam = builder.AddNamedSystem("lidar_slam_2d", slam)
+    builder.ExportInput(slam.GetInputPort("lidar_scan"), "lidar_scan")
+    for port in ("slam_pose", "slam_covariance", "slam_map"):
+        builder.ExportOutput(slam.GetOutputPort(port), port)
+    return slam
+
+
+def _add_exploration(
+    builder, scenario: Scenario, vessel: VesselParams, world: World, slam, meshcat
+):
+    """003's loop: FrontierExplorer → AStarPlanner → VelocitySetpointLaw → ReferenceModel →
+    PdController → ThrustAllocation, on the passive observer's estimate of the SLAM pose."""
+    from usvdrake.systems.control.passive_observer import PassiveObserver, fossen_gains
+    from usvdrake.systems.control.pd_controller import PdController
+    from usvdrake.systems.control.reference_model import ReferenceModel
+    from usvdrake.systems.guidance.astar_planner import AStarPlanner
+    from usvdrake.systems.guidance.frontier_explorer import FrontierExplorer
+    from usvdrake.systems.guidance.operator import OperatorPanel
+    from usvdrake.systems.guidance.velocity_setpoint import ExplorationReport, VelocitySetpointLaw
+
+    cfg = scenario.exploration
+    xi = vessel.hydrodynamics
+    pose0 = np.asarray(scenario.initial_state[:3], float)
+    allocation = builder.AddNamedSystem("thrust_allocation", ThrustAllocation(vessel))
+    if scenario.estimator == "observer":
+        obs_cfg = fossen_gains(
+            xi, cfg.observer.cutoff, T=cfg.observer.bias_time_constant, rate_hz=cfg.observer.rate_hz
+        )
+        observer = builder.AddNamedSystem("passive_observer", PassiveObserver(xi, obs_cfg, pose0))
+        builder.Connect(slam.GetOutputPort("slam_pose"), observer.GetInputPort("pose_measurement"))
+        builder.Connect(allocation.GetOutputPort("tau_achieved"), observer.GetInputPort("tau"))
+        estimate = observer.GetOutputPort("state_estimate")
+        bias = observer.GetOutputPort("bias_estimate")
+        builder.ExportOutput(bias, "bias_estimate")
+    else:
+        oracle = builder.AddNamedSystem("oracle_estimator", PassThrough(6))
+        builder.ExportInput(oracle.get_input_port(), "ground_truth_state")
+        estimate, bias = oracle.get_output_port(), None
+
+    ex = cfg.explorer
+    explorer = builder.AddNamedSystem("frontier_explorer", FrontierExplorer(ex, pose0[:2]))
+    planner = builder.AddNamedSystem(
+        "astar_planner",
+        AStarPlanner(
+            ex.planning_period, ex.start_delay + 1e-3, ex.connection_distance, ex.replan_margin
+        ),
+    )
+    law = builder.AddNamedSystem(
+        "velocity_setpoint_law", VelocitySetpointLaw(pose0[2], pose0[:2], cfg.setpoint_rate_hz)
+    )
+    reference = builder.AddNamedSystem("reference_model", ReferenceModel(cfg.reference, pose0))
+    pd = builder.AddNamedSystem("pd_controller", PdController(xi, cfg.pd))
+    bounds = world.water.bounds if not world.water.is_empty else world.bounds
+    panel = builder.AddNamedSystem(
+        "operator_panel",
+        OperatorPanel(meshcat if cfg.operator_controls else None, bounds, cfg.commands),
+    )
+    report = builder.AddNamedSystem("exploration_report", ExplorationReport())
+
+    builder.Connect(slam.GetOutputPort("slam_map"), explorer.GetInputPort("slam_map"))
+    builder.Connect(
+        panel.GetOutputPort("operator_command"), explorer.GetInputPort("operator_command")
+    )
+    for system in (explorer, planner, law, pd):
+        builder.Connect(estimate, system.GetInputPort("state_estimate"))
+    builder.Connect(explorer.GetOutputPort("planning_map"), planner.GetInputPort("planning_map"))
+    builder.Connect(explorer.GetOutputPort("goals"), planner.GetInputPort("goals"))
+    builder.Connect(planner.GetOutputPort("path"), law.GetInputPort("path"))
+    builder.ConnectInput("lidar_scan", law.GetInputPort("lidar_scan"))
+    builder.Connect(law.GetOutputPort("setpoint"), reference.GetInputPort("setpoint"))
+    builder.Connect(reference.GetOutputPort("reference"), pd.GetInputPort("reference"))
+    if bias is not None:
+        builder.Connect(bias, pd.GetInputPort("bias_estimate"))
+    builder.Connect(pd.GetOutputPort("tau_desired"), allocation.GetInputPort("tau_desired"))
+    builder.Connect(reference.GetOutputPort("reference"), report.GetInputPort("reference_model"))
+    builder.Connect(law.GetOutputPort("lookahead"), report.GetInputPort("lookahead"))
+
+    for system, port, name in (
+        (allocation, "thruster_command", "thruster_command"),
+        (allocation, "tau_achieved", "tau_achieved"),
+        (pd, "tau_desired", "tau_desired"),
+        (explorer, "exploration_finished", "mission_complete"),
+        (explorer, "explorer_status", "explorer_status"),
+        (explorer, "planning_map", "planning_map"),
+        (explorer, "goals", "goals"),
+        (planner, "path", "path"),
+        (planner, "destination", "destination"),
+        (law, "setpoint", "setpoint"),
+        (law, "lookahead", "lookahead"),
+        (panel, "operator_command", "operator_command"),
+        (report, "reference", "reference"),
+    ):
+        builder.ExportOutput(system.GetOutputPort(port), name)
+    builder.ExportOutput(estimate, "state_estimate")
+
+
+def make_autonomy(scenario: Scenario, vessel: VesselParams, world: World, meshcat=None) -> Diagram:
+    """The autonomy diagram of ``scenario``. ``meshcat``: where the operator's controls go
+    (exploration only); without it the operator is the scenario's command script."""
     builder = DiagramBuilder()
+    if scenario.controller == "explore":
+        slam = _add_slam(builder, scenario)
+        _add_exploration(builder, scenario, vessel, world, slam, meshcat)
+        autonomy = builder.Build()
+        autonomy.set_name("autonomy")
+        return autonomy
     if scenario.estimator == "nmhe":
         from usvdrake.systems.estimation.nmhe_system import Nmhe
 
@@ -89,20 +206,7 @@ def make_autonomy(scenario: Scenario, vessel: VesselParams, world: World) -> Dia
         builder.ExportOutput(allocation.GetOutputPort("tau_achieved"), "tau_achieved")
     builder.ExportOutput(estimate, "state_estimate")
     if scenario.slam.method != "none":
-        from usvdrake.sensors.lidar_model import preset_by_name
-        from usvdrake.systems.slam.lidar_slam2d import HectorSlam, LidarSlam2D
-
-        lidar = scenario.sensors.lidar2d
-        period = 1.0 / (lidar.rate_hz or preset_by_name(lidar.preset).rate_hz)
-        start = scenario.initial_state[:3]
-        if scenario.slam.method == "graph":
-            slam = LidarSlam2D(scenario.slam.graph, start, lidar.mount, period)
-        else:
-            slam = HectorSlam(scenario.slam.hector, start, lidar.mount, period)
-        slam = builder.AddNamedSystem("lidar_slam_2d", slam)
-        builder.ExportInput(slam.GetInputPort("lidar_scan"), "lidar_scan")
-        for port in ("slam_pose", "slam_covariance", "slam_map"):
-            builder.ExportOutput(slam.GetOutputPort(port), port)
+        _add_slam(builder, scenario)
     autonomy = builder.Build()
     autonomy.set_name("autonomy")
     return autonomy

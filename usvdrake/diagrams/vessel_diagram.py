@@ -27,7 +27,9 @@ def build_vessel_diagram(
     world = make_world(scenario.world, scenario.seed)
     builder = DiagramBuilder()
     station = builder.AddNamedSystem("station", make_sim_station(scenario, vessel, world))
-    autonomy = builder.AddNamedSystem("autonomy", make_autonomy(scenario, vessel, world))
+    autonomy = builder.AddNamedSystem(
+        "autonomy", make_autonomy(scenario, vessel, world, meshcat=meshcat)
+    )
     builder.Connect(
         autonomy.GetOutputPort("thruster_command"), station.GetInputPort("thruster_command")
     )
@@ -72,6 +74,14 @@ def build_vessel_diagram(
 
             slam_map = builder.AddNamedSystem("slam_map_visualizer", OccupancyVisualizer(meshcat))
             builder.Connect(autonomy.GetOutputPort("slam_map"), slam_map.GetInputPort("map"))
+        if autonomy.HasOutputPort("path"):
+            from usvdrake.viz.exploration_visualizer import ExplorationVisualizer
+
+            ex_viz = builder.AddNamedSystem(
+                "exploration_visualizer", ExplorationVisualizer(meshcat)
+            )
+            for port in ("path", "destination", "planning_map", "goals", "setpoint"):
+                builder.Connect(autonomy.GetOutputPort(port), ex_viz.GetInputPort(port))
         if viz_cfg.lidar_hits:
             for port, name, cfg, three_d in (
                 ("lidar_scan", "lidar_2d", scenario.sensors.lidar2d, False),

@@ -57,7 +57,7 @@ def write_report(
     waypoints,
 ):
     fig, ax = plt.subplots(figsize=(9, 6))
-    wp = np.asarray(waypoints, float)
+    wp = np.asarray(waypoints, float).reshape(-1, 2)
     ax.set_facecolor("#d9d6cf")
     for outer, holes in _water_patches(world.water):
         ax.add_patch(Polygon(outer, color="#bcd7ef", zorder=0))
@@ -68,8 +68,9 @@ def write_report(
         ax.add_patch(
             Polygon(b.footprint(), color=KIND_COLORS.get(b.kind, "#888"), alpha=alpha, zorder=1)
         )
-    pad = 15.0  # zoom on the run, with a margin
     xs, ys = np.concatenate([states[:, 0], wp[:, 0]]), np.concatenate([states[:, 1], wp[:, 1]])
+    # zoom on the run with a margin: 15 m in the canals, a few metres in the basin
+    pad = float(np.clip(0.25 * max(np.ptp(xs), np.ptp(ys)), 2.0, 15.0))
     ax.set_xlim(xs.min() - pad, xs.max() + pad)
     ax.set_ylim(ys.min() - pad, ys.max() + pad)
     ax.plot(wp[:, 0], wp[:, 1], "o--", color="#2ca02c", label="waypoints", zorder=2)

@@ -85,7 +85,8 @@ class VelocitySetpointLaw(LeafSystem):
 
     ``path`` (abstract (n × 2) [m] array; only the first 128 points are used); ``setpoint`` =
     [x_s, y_s, ψ_s] for the reference model, ψ_s the fixed ``heading`` (the round vessel does not
-    steer: 003 §Experimental Platform); ``lookahead`` = [r_s, d_min]. With an empty path the
+    steer: 003 §Experimental Platform); ``lookahead`` = [r_s, d_min, distance from the vessel to
+    the path's closest point (a cross-track error)]. With an empty path the
     setpoint holds where the vessel was when the path emptied (stop, or exploration finished).
     d_min is measured from the lidar, taken to sit at the vessel's centre (003's RPLIDAR is
     on the centre of the lid).
@@ -100,9 +101,9 @@ class VelocitySetpointLaw(LeafSystem):
         self._est = self.DeclareVectorInputPort("state_estimate", 6)
         self._scan = self.DeclareAbstractInputPort("lidar_scan", AbstractValue.Make(LaserScan()))
         x0, y0 = np.asarray(initial_xy, dtype=float)[:2]
-        # [x_s, y_s, ψ_s, r_s, d_min, holding]
+        # [x_s, y_s, ψ_s, r_s, d_min, holding, cross-track]
         self._state = self.DeclareDiscreteState(
-            BasicVector([x0, y0, self._heading, 0.0, np.inf, 1.0])
+            BasicVector([x0, y0, self._heading, 0.0, np.inf, 1.0, 0.0])
         )
         # The re-discretised path is cached in the abstract state with the path it came from,
         # so a path that is handed over every planning cycle is re-sampled once, not 10 ×/s.
@@ -115,8 +116,8 @@ class VelocitySetpointLaw(LeafSystem):
         )
         self.DeclareVectorOutputPort(
             "lookahead",
-            2,
-            lambda c, o: o.SetFromVector(c.get_discrete_state(self._state).value()[3:5]),
+            3,
+            lambda c, o: o.SetFromVector(c.get_discrete_state(self._state).value()[[3, 4, 6]]),
         )
 
     def _update(self, context, state):
@@ -127,14 +128,41 @@ class VelocitySetpointLaw(LeafSystem):
         if len(path) == 0:
             if current[5] == 0.0:  # the path just emptied: hold here
                 current[:2] = est[:2]
-            current[3], current[4], current[5] = 0.0, d_min, 1.0
+            current[3], current[4], current[5], current[6] = 0.0, d_min, 1.0, 0.0
         else:
             source, dense = context.get_abstract_state(self._dense).get_value()
             if source.shape != path.shape or not np.array_equal(source, path):
                 dense = rediscretise(path)
                 state.get_mutable_abstract_state(self._dense).set_value((path.copy(), dense))
-            p_s, _, _ = setpoint_on_path(dense, est[:2], d_min)
+            p_s, closest, _ = setpoint_on_path(dense, est[:2], d_min)
             current[:2] = p_s
             current[3], current[4], current[5] = lookahead_distance(d_min), d_min, 0.0
+            current[6] = np.linalg.norm(dense[closest] - est[:2])
         current[2] = self._heading
         state.get_mutable_discrete_state(self._state).SetFromVector(current)
+
+
+class ExplorationReport(LeafSystem):
+    """The exploration loop's ``reference`` in the form the mission metrics and report read
+    for every controller: [ψ_d, speed of the reference model |η̇_d| (the speed 003's law asks
+    for), distance to the planned path].
+
+    .. pydrake_system::
+
+        name: ExplorationReport
+        input_ports:
+        - reference_model
+        - lookahead
+        output_ports:
+        - reference
+    """
+
+    def __init__(self):
+        super().__init__()
+        self._ref = self.DeclareVectorInputPort("reference_model", 9)
+        self._look = self.DeclareVectorInputPort("lookahead", 3)
+        self.DeclareVectorOutputPort("reference", 3, self._calc)
+
+    def _calc(self, context, output):
+        ref, look = self._ref.Eval(context), self._look.Eval(context)
+        output.SetFromVector([ref[2], np.hypot(ref[3], ref[4]), look[2]])
