@@ -5,30 +5,14 @@ Needs Debian's chromium (``apt-get install chromium``; `.ci/run` installs it) an
 """
 
 import io
-import shutil
 
 import numpy as np
 import pytest
+from _browser import ARGS, BROWSER_TEST, CHROMIUM
 
 from usvdrake import load_scenario, run_mission
 
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-pytestmark = [
-    pytest.mark.slow,
-    pytest.mark.skipif(
-        CHROMIUM is None, reason="chromium not installed (apt-get install chromium)"
-    ),
-]
-ARGS = [
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-]
+pytestmark = BROWSER_TEST
 
 
 def test_replay_renders_the_canal_and_the_vessel(tmp_path):

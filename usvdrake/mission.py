@@ -69,7 +69,13 @@ def _exploration_summary(scenario, vessel, world, autonomy, context, logs) -> di
     status_log = logs["explorer_status"]
     status = status_log.data().T
     done = np.flatnonzero(status[:, 2] > 0)
-    finished_time = float(status_log.sample_times()[done[0]]) if len(done) else None
+    explorer = autonomy.GetSubsystemByName("frontier_explorer")
+    final = explorer.GetOutputPort("explorer_status").Eval(explorer.GetMyContextFromRoot(context))
+    finished_time = None
+    if len(done):
+        finished_time = float(status_log.sample_times()[done[0]])
+    elif final[2] > 0:  # finished after the last log sample: the run stopped right there
+        finished_time = float(context.get_time())
     times = logs["ground_truth_state"].sample_times()
     states = logs["ground_truth_state"].data().T
     out = exploration_metrics(
@@ -86,7 +92,7 @@ def _exploration_summary(scenario, vessel, world, autonomy, context, logs) -> di
         pose_source="passive_observer(slam_pose)"
         if scenario.estimator == "observer"
         else "ground_truth",
-        planning_cycles=int(status[-1, 3]) if len(status) else 0,
+        planning_cycles=int(final[3]),
     )
     return out
 

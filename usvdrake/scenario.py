@@ -154,7 +154,7 @@ class ExplorationConfig:
     explorer: ExplorerConfig = field(default_factory=ExplorerConfig)
     setpoint_rate_hz: float = 10.0  # [Hz] the velocity-setpoint law (faster than the planner)
     reference: ReferenceModelConfig = field(
-        default_factory=lambda: ReferenceModelConfig(omega=0.3, zeta=1.0, v_max=0.3, a_max=0.1)
+        default_factory=lambda: ReferenceModelConfig(omega=0.45, zeta=1.0, v_max=0.3, a_max=0.1)
     )
     pd: PdControllerConfig = field(default_factory=PdControllerConfig)
     observer: ObserverSettings = field(default_factory=ObserverSettings)
@@ -316,6 +316,15 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
             raise ConfigError(file, key, f"{n} numbers", f"{len(get_dotted(s, key))} numbers")
     if s.estimator not in ESTIMATORS:
         raise ConfigError(file, "estimator", "one of " + ", ".join(ESTIMATORS), repr(s.estimator))
+    if s.controller == "explore":
+        _validate_exploration(s, file)
+    elif s.estimator == "observer":
+        raise ConfigError(
+            file,
+            "estimator",
+            "'oracle' or 'nmhe' (the observer serves controller explore)",
+            "'observer'",
+        )
     if s.slam.method not in ("none", "graph", "hector"):
         raise ConfigError(file, "slam.method", "'none', 'graph' or 'hector'", repr(s.slam.method))
     if s.slam.method != "none" and "lidar2d" not in s.sensors.enabled:
@@ -332,9 +341,7 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
             "'pose' in the list (the NMHE measures it)",
             repr(s.sensors.enabled),
         )
-    if s.controller == "explore":
-        _validate_exploration(s, file)
-    elif not s.mission.waypoints:
+    if s.controller != "explore" and not s.mission.waypoints:
         raise ConfigError(file, "mission.waypoints", "at least one [x, y] waypoint", "none")
     for i, wp in enumerate(s.mission.waypoints):
         if len(wp) != 2:

@@ -152,7 +152,10 @@ def slam_metrics(times: np.ndarray, states: np.ndarray, slam_poses: np.ndarray, 
     }
 
 
-OPEN_WATER_CLEARANCE = 2.1  # [m] 003 eq. (2): beyond this the look-ahead is at its 3 m maximum
+# [m] open water for the speed metric: the centre at least this far from every solid, where
+# 003 eq. (2) gives a look-ahead of ≥ 1.8 m. (Its 3 m maximum needs 2.1 m all round, which the
+# 6.45 m basin with its obstacles never offers.)
+OPEN_WATER_CLEARANCE = 1.5
 CONTACT_CLEARANCE = 0.1  # [m] the exploration issue counts a hull closer than this as a collision
 MOVING_SPEED = 0.02  # [m/s] below this the vessel is holding position, not travelling
 
@@ -202,8 +205,8 @@ def exploration_metrics(
     """003's exploration run: coverage (:func:`explored_fraction`), safety (collisions =
     episodes with the hull within 0.1 m of a solid) and the speeds of 003 Fig. 17: median
     speed inside the world's ``narrow_passage`` region and median speed while travelling
-    (≥ 0.02 m/s) in open water, where the centre is ≥ 2.1 m from every solid (the full look-ahead
-    of eq. 2)."""
+    (≥ 0.02 m/s) in open water, where the centre is ≥ 1.5 m from every solid
+    (``OPEN_WATER_CLEARANCE``)."""
     hull = vessel.hull
     clearance = hull_clearance(world, states, hull.length, hull.beam, hull.height)
     contact = clearance < CONTACT_CLEARANCE
