@@ -54,3 +54,18 @@ def test_cli_run_writes_outputs(tmp_path, capsys):
     assert "simulated 3.0 s" in out and "replay" in out
     assert (tmp_path / "replay.html").is_file()
     assert json.loads((tmp_path / "metrics.json").read_text())["sim_time_s"] == pytest.approx(3.0)
+
+
+@pytest.mark.slow
+def test_basin_exploration_meets_003(tmp_path):
+    """The exploration issue's numbers, end to end: Hector SLAM, frontiers, A*, velocity law,
+    observer + PD + reference model + allocation, from no map to finished (~20 s wall)."""
+    m = run_mission(load_scenario("basin_explore"), out_dir=tmp_path, record=False).metrics
+    assert m["exploration_finished"] and m["mission_complete"]
+    assert m["explored_fraction"] >= 0.95
+    assert m["collisions"] == 0 and m["min_clearance_m"] >= 0.1
+    assert m["speed_narrow_mps"] <= 0.10 and m["narrow_passage_samples"] > 50
+    assert m["speed_open_mps"] >= 0.25 and m["open_water_samples"] > 50
+    assert m["map_source"] == "slam:hector"
+    assert 0 < m["exploration_time_s"] <= m["sim_time_s"] + 1e-9
+    assert (tmp_path / "metrics.json").is_file() and (tmp_path / "report.html").is_file()
