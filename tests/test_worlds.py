@@ -86,3 +86,17 @@ def test_unknown_world_is_one_clear_line():
     with pytest.raises(KeyError, match="amsterdam_canals"):
         make_world("atlantis")
     assert "canal_demo" in available_worlds()
+
+
+def test_round_hull_clearance_is_the_same_at_every_heading():
+    """003's round vessel: the clearance is the distance to the circle of its top diameter,
+    not to the square around it (whose corners stick out 0.11 m further)."""
+    from usvdrake.worlds.solids import box
+    from usvdrake.worlds.world import World, hull_clearance
+
+    world = World("wall", 0, solids=[box("wall", 0.0, -0.5, 10.0, 1.0, 0.0, -1.0, 1.0)])
+    states = [[0.0, 1.0, psi, 0, 0, 0] for psi in np.linspace(0.0, np.pi, 7)]
+    round_c = hull_clearance(world, np.array(states), 0.548, 0.548, 0.2, "round")
+    np.testing.assert_allclose(round_c, 1.0 - 0.274, atol=2e-3)
+    square = hull_clearance(world, np.array(states), 0.548, 0.548, 0.2)
+    assert square.min() < 1.0 - 0.274 - 0.1  # the square's corner at 45°

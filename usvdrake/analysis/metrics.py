@@ -25,7 +25,7 @@ def mission_metrics(
     xy = states[:, :2]
     speed = np.hypot(states[:, 3], states[:, 4])
     hull = vessel.hull
-    clearance = hull_clearance(world, states, hull.length, hull.beam, hull.height)
+    clearance = hull_clearance(world, states, hull.length, hull.beam, hull.height, hull.shape)
     limits = []
     for t in vessel.thrusters:
         limits += [t.max_force, np.inf] if t.azimuth else [max(t.max_force, -t.min_force)]
@@ -208,7 +208,7 @@ def exploration_metrics(
     (≥ 0.02 m/s) in open water, where the centre is ≥ 1.5 m from every solid
     (``OPEN_WATER_CLEARANCE``)."""
     hull = vessel.hull
-    clearance = hull_clearance(world, states, hull.length, hull.beam, hull.height)
+    clearance = hull_clearance(world, states, hull.length, hull.beam, hull.height, hull.shape)
     contact = clearance < CONTACT_CLEARANCE
     episodes = int(np.sum(contact[1:] & ~contact[:-1]) + (contact[0] if len(contact) else 0))
     speed = np.hypot(states[:, 3], states[:, 4])

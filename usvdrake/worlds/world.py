@@ -177,8 +177,13 @@ class World:
         return grid
 
 
-def hull_outline(length: float, beam: float, n_per_side: int = 4) -> np.ndarray:
-    """Sample points (k × 2) on a rectangular hull outline, body frame."""
+def hull_outline(length: float, beam: float, n_per_side: int = 4, shape: str = "box") -> np.ndarray:
+    """Sample points (k × 2) on the hull outline, body frame: a ``length`` × ``beam`` rectangle,
+    or for ``shape="round"`` (003's cone-like vessel) the circle of diameter ``length`` (the
+    widest, top diameter), 8 ``n_per_side`` points."""
+    if shape == "round":
+        a = np.linspace(0.0, 2.0 * np.pi, 8 * n_per_side, endpoint=False)
+        return 0.5 * length * np.column_stack([np.cos(a), np.sin(a)])
     t = np.linspace(-0.5, 0.5, n_per_side + 1)
     pts = [[length * a, beam / 2] for a in t] + [[length * a, -beam / 2] for a in t]
     pts += [[length / 2, beam * a] for a in t] + [[-length / 2, beam * a] for a in t]
@@ -186,11 +191,16 @@ def hull_outline(length: float, beam: float, n_per_side: int = 4) -> np.ndarray:
 
 
 def hull_clearance(
-    world: World, states: np.ndarray, length: float, beam: float, height: float
+    world: World,
+    states: np.ndarray,
+    length: float,
+    beam: float,
+    height: float,
+    shape: str = "box",
 ) -> np.ndarray:
-    """Per state [x y ψ ...], the distance [m] from the hull outline to the nearest solid
-    (negative when the hull overlaps one; inf when nothing is within 10 m)."""
-    outline = hull_outline(length, beam)
+    """Per state [x y ψ ...], the distance [m] from the hull outline (:func:`hull_outline`) to
+    the nearest solid (negative when the hull overlaps one; inf when nothing is within 10 m)."""
+    outline = hull_outline(length, beam, shape=shape)
     states = np.atleast_2d(states)
     c, s = np.cos(states[:, 2]), np.sin(states[:, 2])
     px = states[:, [0]] + c[:, None] * outline[:, 0] - s[:, None] * outline[:, 1]
