@@ -64,8 +64,7 @@ def _write_tum(path: Path, times: np.ndarray, states: np.ndarray) -> None:
 def _exploration_summary(scenario, vessel, world, autonomy, context, logs) -> dict:
     """003's exploration metrics (:func:`exploration_metrics`) on the final SLAM map, with the
     time the explorer declared the exploration finished and which map and pose it used."""
-    slam_sys = autonomy.GetSubsystemByName("lidar_slam_2d")
-    final_map = slam_sys.GetOutputPort("slam_map").Eval(slam_sys.GetMyContextFromRoot(context))
+    final_map = autonomy.GetOutputPort("slam_map").Eval(autonomy.GetMyContextFromRoot(context))
     status_log = logs["explorer_status"]
     status = status_log.data().T
     done = np.flatnonzero(status[:, 2] > 0)
@@ -91,7 +90,7 @@ def _exploration_summary(scenario, vessel, world, autonomy, context, logs) -> di
         map_source=f"slam:{scenario.slam.method}",
         pose_source="passive_observer(slam_pose)"
         if scenario.estimator == "observer"
-        else "ground_truth",
+        else "ground_truth (oracle)",
         planning_cycles=int(final[3]),
     )
     return out

@@ -31,6 +31,7 @@ SCENARIO_DIR = Path(__file__).parent / "scenarios"
 DEFAULT_SCENARIO = "canal_demo"
 ESTIMATORS = ("oracle", "nmhe", "observer")
 CONTROLLERS = ("baseline", "nmpc", "explore")
+SLAM_METHODS = ("none", "graph", "hector", "known_poses")
 
 
 @dataclass
@@ -128,8 +129,9 @@ class SensorsConfig:
 @dataclass
 class SlamConfig:
     # "none"; "graph": 002's sliding-window graph SLAM; "hector": 003's Hector-style SLAM; both
-    # on lidar_scan (needs lidar2d). The SLAM runs in the autonomy half as an observer; metrics
-    # score it against ground truth.
+    # on lidar_scan (needs lidar2d). "known_poses": the exploration's ground-truth map source —
+    # the same scans inserted at the true pose (grid extent and resolution from ``hector``).
+    # The SLAM runs in the autonomy half as an observer; metrics score it against ground truth.
     method: str = "none"
     graph: GraphSlamConfig = field(default_factory=GraphSlamConfig)
     hector: HectorConfig = field(default_factory=HectorConfig)
@@ -325,8 +327,17 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
             "'oracle' or 'nmhe' (the observer serves controller explore)",
             "'observer'",
         )
-    if s.slam.method not in ("none", "graph", "hector"):
-        raise ConfigError(file, "slam.method", "'none', 'graph' or 'hector'", repr(s.slam.method))
+    if s.slam.method not in SLAM_METHODS:
+        raise ConfigError(
+            file, "slam.method", "one of " + ", ".join(SLAM_METHODS), repr(s.slam.method)
+        )
+    if s.slam.method == "known_poses" and (s.controller != "explore" or s.estimator != "oracle"):
+        raise ConfigError(
+            file,
+            "slam.method",
+            "'known_poses' only with controller explore and estimator oracle",
+            repr(s.slam.method),
+        )
     if s.slam.method != "none" and "lidar2d" not in s.sensors.enabled:
         raise ConfigError(
             file,

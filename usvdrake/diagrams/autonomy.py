@@ -31,19 +31,37 @@ def make_reference(scenario: Scenario, world: World):
     )
 
 
-def _add_slam(builder: DiagramBuilder, scenario: Scenario):
-    """The 2D SLAM on the exported ``lidar_scan``; its ports exported, the system returned."""
+def _add_oracle(builder: DiagramBuilder):
+    """The oracle estimator: ``ground_truth_state`` passed through (the only place the
+    autonomy reads ground truth)."""
+    oracle = builder.AddNamedSystem("oracle_estimator", PassThrough(6))
+    builder.ExportInput(oracle.get_input_port(), "ground_truth_state")
+    return oracle
+
+
+def _add_slam(builder: DiagramBuilder, scenario: Scenario, pose=None):
+    """The 2D SLAM on the exported ``lidar_scan``; its ports exported, the system returned.
+    ``known_poses`` maps at ``pose`` (an output port: the oracle's estimate) instead."""
     from usvdrake.sensors.lidar_model import preset_by_name
+    from usvdrake.systems.slam.known_pose_mapper import KnownPoseMapper
     from usvdrake.systems.slam.lidar_slam2d import HectorSlam, LidarSlam2D
 
     lidar = scenario.sensors.lidar2d
     period = 1.0 / (lidar.rate_hz or preset_by_name(lidar.preset).rate_hz)
     start = scenario.initial_state[:3]
-    if scenario.slam.method == "graph":
+    if scenario.slam.method == "known_poses":
+        h = scenario.slam.hector  # the grid's extent and resolution
+        mapper = KnownPoseMapper(
+            h.map_origin, h.map_size, h.resolution, lidar.mount, period, h.max_range
+        )
+        slam = builder.AddNamedSystem("known_pose_mapper", mapper)
+        builder.Connect(pose, slam.GetInputPort("state_estimate"))
+    elif scenario.slam.method == "graph":
         slam = LidarSlam2D(scenario.slam.graph, start, lidar.mount, period)
     else:
         slam = HectorSlam(scenario.slam.hector, start, lidar.mount, period)
-    slam = builder.AddNamedSystem("lidar_slam_2d", slam)
+    if scenario.slam.method != "known_poses":
+        slam = builder.AddNamedSystem("lidar_slam_2d", slam)
     builder.ExportInput(slam.GetInputPort("lidar_scan"), "lidar_scan")
     for port in ("slam_pose", "slam_covariance", "slam_map"):
         builder.ExportOutput(slam.GetOutputPort(port), port)
@@ -51,7 +69,7 @@ def _add_slam(builder: DiagramBuilder, scenario: Scenario):
 
 
 def _add_exploration(
-    builder, scenario: Scenario, vessel: VesselParams, world: World, slam, meshcat
+    builder, scenario: Scenario, vessel: VesselParams, world: World, slam, meshcat, oracle=None
 ):
     """003's loop: FrontierExplorer → AStarPlanner → VelocitySetpointLaw → ReferenceModel →
     PdController → ThrustAllocation, on the passive observer's estimate of the SLAM pose."""
@@ -78,8 +96,8 @@ def _add_exploration(
         bias = observer.GetOutputPort("bias_estimate")
         builder.ExportOutput(bias, "bias_estimate")
     else:
-        oracle = builder.AddNamedSystem("oracle_estimator", PassThrough(6))
-        builder.ExportInput(oracle.get_input_port(), "ground_truth_state")
+        if oracle is None:
+            oracle = _add_oracle(builder)
         estimate, bias = oracle.get_output_port(), None
 
     ex = cfg.explorer
@@ -144,8 +162,9 @@ def make_autonomy(scenario: Scenario, vessel: VesselParams, world: World, meshca
     (exploration only); without it the operator is the scenario's command script."""
     builder = DiagramBuilder()
     if scenario.controller == "explore":
-        slam = _add_slam(builder, scenario)
-        _add_exploration(builder, scenario, vessel, world, slam, meshcat)
+        oracle = _add_oracle(builder) if scenario.slam.method == "known_poses" else None
+        slam = _add_slam(builder, scenario, oracle.get_output_port() if oracle else None)
+        _add_exploration(builder, scenario, vessel, world, slam, meshcat, oracle)
         autonomy = builder.Build()
         autonomy.set_name("autonomy")
         return autonomy
@@ -162,9 +181,7 @@ def make_autonomy(scenario: Scenario, vessel: VesselParams, world: World, meshca
         estimate = nmhe.GetOutputPort("state_estimate")
         nmhe_force = nmhe.GetOutputPort("tau_env_estimate")
     else:
-        estimator = builder.AddNamedSystem("oracle_estimator", PassThrough(6))
-        builder.ExportInput(estimator.get_input_port(), "ground_truth_state")
-        estimate = estimator.get_output_port()
+        estimate = _add_oracle(builder).get_output_port()
 
     if scenario.controller == "nmpc":
         from usvdrake.systems.control.nmpc_system import Nmpc
