@@ -4,10 +4,9 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
-from pydrake.systems.primitives import Linearize
 from scipy.integrate import solve_ivp
 
-from usvdrake.systems.vessel.vessel_dynamics import straight_run_jacobian, trim_thrust
+from usvdrake.systems.vessel.vessel_dynamics import straight_run_jacobian
 from usvdrake.systems.vessel.vessel_plant import VesselPlant, VesselPlant_
 from usvdrake.vessel import load_vessel
 
@@ -111,22 +110,12 @@ def test_linearisation_about_straight_run(name):
     v = load_vessel(name)
     xi = v.hydrodynamics
     u0 = 0.6
-    plant = VesselPlant(v)
-    ctx = plant.CreateDefaultContext()
-    ctx.SetContinuousState([0, 0, 0, u0, 0, 0])
-    plant.GetInputPort("tau").FixValue(ctx, trim_thrust(xi, u0))
-    plant.GetInputPort("tau_env").FixValue(ctx, np.zeros(3))
-    plant.GetInputPort("current").FixValue(ctx, np.zeros(2))
-    lin = Linearize(
-        plant,
-        ctx,
-        input_port_index=plant.GetInputPort("tau").get_index(),
-        output_port_index=plant.GetOutputPort("state").get_index(),
-        equilibrium_check_tolerance=np.inf,
-    )
-    np.testing.assert_allclose(lin.A(), straight_run_jacobian(xi, u0), atol=1e-12)
+    from usvdrake.analysis.stability import linearize_plant
+
+    A, B = linearize_plant(v, u0)  # Drake's Linearize on the AutoDiffXd plant
+    np.testing.assert_allclose(A, straight_run_jacobian(xi, u0), atol=1e-12)
     np.testing.assert_allclose(
-        lin.B(),
+        B,
         np.vstack([np.zeros((3, 3)), np.diag([1 / xi.m11, 1 / xi.m22, 1 / xi.m33])]),
         atol=1e-12,
     )
@@ -134,7 +123,7 @@ def test_linearisation_about_straight_run(name):
     c = (xi.Yv * xi.Nr - (xi.m22 - xi.m11) * xi.m11 * u0**2) / (xi.m22 * xi.m33)
     quad = np.roots([1.0, b, c])
     expected = np.sort_complex(np.concatenate([[0, 0, 0, -xi.Xu / xi.m11], quad]))
-    got = np.sort_complex(np.linalg.eigvals(lin.A()))
+    got = np.sort_complex(np.linalg.eigvals(A))
     np.testing.assert_allclose(got, expected, atol=1e-9)
 
 
