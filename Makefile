@@ -29,7 +29,7 @@ test: lint
 
 bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e ".[bench]"
-	for b in demo_speed raycast nmpc identification astar; do $(BIN)/usvdrake bench $$b; done
+	for b in demo_speed raycast nmpc identification astar campaign; do $(BIN)/usvdrake bench $$b; done
 
 clean:
 	rm -rf $(VENV) out .pytest_cache

@@ -469,3 +469,17 @@ def test_analyze_baseline_and_nmpc():
     assert n["loops"]["nmpc_lq"]["sampled"]["stable"]
     assert isinstance(n["loops"]["nmpc_lq"]["continuous"], str)
     assert "nmpc_lq" in st.format_table(n)
+
+
+def test_cli_analyze_stability_writes_json_and_plots(tmp_path, capsys):
+    from usvdrake.cli import main
+
+    assert (
+        main(["analyze", "stability", "basin_explore", "--out", str(tmp_path), "--samples", "500"])
+        == 0
+    )
+    out = capsys.readouterr().out
+    assert "region of attraction" in out and "pd_observer" in out
+    for name in ("analysis.json", "poles.png", "roa.png"):
+        assert (tmp_path / name).is_file()
+    assert main(["analyze", "stability", "no_such_scenario"]) == 2

@@ -1,4 +1,5 @@
-"""The ``usvdrake`` command: ``run`` a scenario, ``bench`` a benchmark, ``identify`` ξ."""
+"""The ``usvdrake`` command: ``run`` a scenario, ``campaign`` it over random days, ``bench`` a
+benchmark, ``identify`` ξ."""
 
 import argparse
 import runpy
@@ -66,6 +67,43 @@ def cmd_run(args) -> int:
         except KeyboardInterrupt:
             pass
     return 0
+
+
+def cmd_campaign(args) -> int:
+    """Monte Carlo over random days (usvdrake.campaign): DIR/campaign.json, report.html, runs/."""
+    from usvdrake.campaign import run_campaign
+    from usvdrake.scenario import load_scenario
+
+    for flag, value in (("--runs", args.runs), ("--workers", args.workers)):
+        if value < 1:
+            raise ConfigError("command line", flag, "an integer >= 1", value)
+    if args.seed < 0:
+        raise ConfigError("command line", "--seed", "an integer >= 0", args.seed)
+    scenario = load_scenario(args.scenario)
+    c = run_campaign(
+        scenario,
+        args.runs,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        seed=args.seed,
+        out_dir=args.out,
+        duration=args.duration,
+        progress=not args.quiet,
+    )
+    s = c["summary"]
+    print(
+        f"usvdrake campaign {c['scenario']}: {s['runs']} runs (seed {c['campaign_seed']}) on "
+        f"{c['workers']} workers in {c['wall_time_s']:.1f} s wall\n"
+        f"  {s['completed']} completed, {s['failed']} failed; success (mission complete, no "
+        f"collision) {s['successes']}/{s['runs']} = {100 * s['success_rate']:.1f} %"
+    )
+    for key in list(s["metrics"])[:6]:
+        st = s["metrics"][key]
+        print(f"  {key:<28} median {st['median']:.4g}  p5 {st['p5']:.4g}  p95 {st['p95']:.4g}")
+    out = Path(args.out)
+    for name in ("campaign.json", "report.html", "runs"):
+        print(f"  {name:<14} {out / name}")
+    return 0 if s["completed"] else 1
 
 
 def cmd_bench(args) -> int:
@@ -186,6 +224,22 @@ def make_parser() -> argparse.ArgumentParser:
     )
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.set_defaults(func=cmd_run)
+    c = sub.add_parser("campaign", help="Monte Carlo: run a scenario over many random days (Dask)")
+    c.add_argument("scenario", help="shipped scenario name or YAML path")
+    c.add_argument("--runs", type=int, required=True, help="number of randomised runs")
+    c.add_argument(
+        "--workers", type=int, default=2, help="local Dask worker processes (default: 2)"
+    )
+    c.add_argument(
+        "--scheduler", default=None, help="address of an existing Dask scheduler (tcp://HOST:PORT)"
+    )
+    c.add_argument("--seed", type=int, default=0, help="campaign seed (run i: its child i)")
+    c.add_argument(
+        "--duration", type=float, default=None, help="override the simulated duration [s]"
+    )
+    c.add_argument("--out", default="out/campaign", help="output folder (default: out/campaign)")
+    c.add_argument("--quiet", action="store_true", help="no progress bar")
+    c.set_defaults(func=cmd_campaign)
     b = sub.add_parser("bench", help="run bench/NAME.py (prints one JSON object)")
     b.add_argument("name")
     b.add_argument("args", nargs=argparse.REMAINDER)
@@ -219,7 +273,38 @@ def make_parser() -> argparse.ArgumentParser:
     m.add_argument("--max-scans", type=int, default=None, help="stop after this many scans")
     m.add_argument("--quiet", action="store_true", help="no progress bar")
     m.set_defaults(func=cmd_slam2d)
+    a = sub.add_parser("analyze", help="analyses of a scenario's closed loop")
+    what = a.add_subparsers(dest="analysis", required=True)
+    st = what.add_parser(
+        "stability",
+        help="closed-loop eigenvalues (continuous and sampled), margins, region of attraction",
+    )
+    st.add_argument("scenario", help="a shipped scenario name or a YAML path")
+    st.add_argument("--out", default=None, help="write analysis.json and plots here")
+    st.add_argument(
+        "--samples", type=int, default=10_000, help="states sampled to check the region (V̇ < 0)"
+    )
+    st.set_defaults(func=cmd_analyze_stability)
     return p
+
+
+def cmd_analyze_stability(args) -> int:
+    """Table to stdout; with --out, DIR/analysis.json, pole map, Bode plots, region slices."""
+    from usvdrake.analysis.stability import analyze_stability, format_table
+    from usvdrake.scenario import load_scenario
+
+    if args.samples < 0:
+        raise ConfigError("command line", "--samples", "an integer >= 0", args.samples)
+    result = analyze_stability(load_scenario(args.scenario), args.out, roa_samples=args.samples)
+    print(format_table(result))
+    if args.out:
+        print(f"  analysis.json and plots in {args.out}")
+    unstable = [
+        name
+        for name, loop in result.get("loops", {}).items()
+        if any(loop.get(k, {}).get("stable") is False for k in ("continuous", "sampled"))
+    ]
+    return 1 if unstable else 0
 
 
 def cmd_slam2d(args) -> int:

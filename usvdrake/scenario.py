@@ -175,6 +175,9 @@ class Scenario:
     duration: float = 60.0  # [s] simulated time; the run ends earlier when the mission completes
     seed: int = 0  # seed of every random source (world, environment, later sensors)
     initial_state: list[float] = field(default_factory=lambda: [0.0] * 6)  # [x y ψ u v r]
+    # Multiplicative errors on the simulated plant's ξ = [m11 m22 m33 Xu Yv Nr] (the station
+    # only; the autonomy's NMPC/NMHE/controllers keep the vessel file's nominal ξ)
+    model_error: list[float] = field(default_factory=lambda: [1.0] * 6)
     # "oracle": the autonomy reads ground truth; "nmhe": 000's NMHE on the pose sensor and the
     # measured thrust (needs "pose" in sensors.enabled)
     estimator: str = "oracle"
@@ -297,6 +300,10 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
     if len(s.initial_state) != 6:
         raise ConfigError(
             file, "initial_state", "6 numbers [x y psi u v r]", f"{len(s.initial_state)} numbers"
+        )
+    if len(s.model_error) != 6 or not all(f > 0 for f in s.model_error):
+        raise ConfigError(
+            file, "model_error", "6 positive factors on [m11 m22 m33 Xu Yv Nr]", repr(s.model_error)
         )
     if s.controller not in CONTROLLERS:
         raise ConfigError(

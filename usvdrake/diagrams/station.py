@@ -7,6 +7,7 @@ Ports (DESIGN.md): input ``thruster_command``; outputs ``thrust_measured``, the 
 
 import dataclasses
 
+import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder
 
 from usvdrake.scenario import Scenario
@@ -25,12 +26,14 @@ from usvdrake.worlds.world import World
 
 def make_sim_station(scenario: Scenario, vessel: VesselParams, world: World) -> Diagram:
     """Thrust mixer → vessel plant ← environment, and the scenario's sensors, as one named
-    Diagram ``station``."""
+    Diagram ``station``. ``vessel`` is the nominal vessel; the plant and the wave loads use its
+    ξ times ``scenario.model_error`` (the truth the autonomy's nominal model does not know)."""
     builder = DiagramBuilder()
     mixer = builder.AddNamedSystem("thrust_mixer", ThrustMixer(vessel.thrusters))
-    plant = builder.AddNamedSystem("plant", VesselPlant(vessel, scenario.initial_state))
+    true_vessel = with_model_error(vessel, scenario.model_error)  # the physics: plant + waves
+    plant = builder.AddNamedSystem("plant", VesselPlant(true_vessel, scenario.initial_state))
     env = builder.AddNamedSystem(
-        "environment", Environment(scenario.environment, vessel, scenario.seed)
+        "environment", Environment(scenario.environment, true_vessel, scenario.seed)
     )
     builder.Connect(mixer.GetOutputPort("tau"), plant.GetInputPort("tau"))
     builder.Connect(env.GetOutputPort("tau_env"), plant.GetInputPort("tau_env"))
@@ -61,6 +64,19 @@ def make_sim_station(scenario: Scenario, vessel: VesselParams, world: World) -> 
     station = builder.Build()
     station.set_name("station")
     return station
+
+
+def with_model_error(vessel: VesselParams, factors) -> VesselParams:
+    """``vessel`` with its ξ = [m11 m22 m33 Xu Yv Nr] multiplied by ``factors`` (a copy; the
+    same object when all factors are 1)."""
+    if all(f == 1.0 for f in factors):
+        return vessel
+    xi = vessel.hydrodynamics.as_vector() * np.asarray(factors, float)
+    keys = ("m11", "m22", "m33", "Xu", "Yv", "Nr")
+    hydro = dataclasses.replace(
+        vessel.hydrodynamics, **dict(zip(keys, map(float, xi), strict=True))
+    )
+    return dataclasses.replace(vessel, hydrodynamics=hydro)
 
 
 def _make_sensor(name: str, scenario: Scenario, world: World):

@@ -23,7 +23,7 @@ def build_vessel_diagram(
     """
     if hardware is not None:
         raise ValueError("hardware stations are not available in this version (simulation only)")
-    vessel = load_vessel(scenario.vessel)
+    vessel = load_vessel(scenario.vessel)  # nominal: the station applies scenario.model_error
     world = make_world(scenario.world, scenario.seed)
     builder = DiagramBuilder()
     station = builder.AddNamedSystem("station", make_sim_station(scenario, vessel, world))
