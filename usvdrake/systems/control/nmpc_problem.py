@@ -27,7 +27,7 @@ import scipy.sparse as sp
 from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue, InitializeAutoDiff
 from pydrake.solvers import ClarabelSolver, IpoptSolver, MathematicalProgram, OsqpSolver
 
-from usvdrake.systems.vessel.thrusters import configuration_matrix
+from usvdrake.systems.vessel.thrusters import configuration_matrix, thrust_envelope
 from usvdrake.systems.vessel.vessel_discrete import rk4, rk4_with_jacobians
 from usvdrake.systems.vessel.vessel_dynamics import coriolis_times_velocity
 from usvdrake.vessel import VesselParams
@@ -98,6 +98,7 @@ class NmpcProblem:
         self.N = int(round(cfg.horizon / cfg.dt))
         self.dt = cfg.dt
         self.B_thr = configuration_matrix(vessel.thrusters)  # τ = B u (eq. 3)
+        self.disturbance_limit = thrust_envelope(vessel.thrusters)
         self.B_pinv = np.linalg.pinv(self.B_thr)
         self.nu = self.B_thr.shape[1]
         self.u_min = np.array([t.min_force for t in vessel.thrusters])
@@ -172,10 +173,16 @@ class NmpcProblem:
     ) -> np.ndarray:
         """Offset-free MPC (Pannocchia & Rawlings 2003, here as a body-frame force): the one-step
         velocity prediction error, times M / dt, is the force the model missed; d̂ moves towards
-        it by ``disturbance_gain`` (a first-order filter against measurement noise)."""
+        it by ``disturbance_gain`` (a first-order filter against measurement noise).
+
+        d̂ is clipped to the thrusters' combined force (:func:`thrust_envelope`): a larger force
+        cannot be countered anyway, and without the bound the filter integrates estimator
+        start-up transients without limit (a campaign run wound it up to 3.4 kN in sway, and
+        every QP after that was infeasible)."""
         m = np.array([self.xi.m11, self.xi.m22, self.xi.m33])
         missed = m * (np.asarray(nu_measured) - np.asarray(nu_predicted)) / self.dt
-        return np.asarray(d, float) + self.cfg.disturbance_gain * missed
+        d = np.asarray(d, float) + self.cfg.disturbance_gain * missed
+        return np.clip(d, -self.disturbance_limit, self.disturbance_limit)
 
     def initial_guess(
         self, q_hat: np.ndarray, u_ref: np.ndarray, disturbance=None

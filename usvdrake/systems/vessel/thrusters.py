@@ -64,6 +64,15 @@ def mix(thrusters: list[Thruster], command) -> np.ndarray:
     return np.array(tau)
 
 
+def thrust_envelope(thrusters: list[Thruster]) -> np.ndarray:
+    """[X, Y, N] bounds [N, N, N m] on any generalised force the thrusters can produce
+    together: Σ f_max in surge and sway, Σ f_max · (distance from the origin) in yaw (each
+    thruster at full force, pointing the most useful way; loose for fixed thrusters)."""
+    f = np.array([max(t.max_force, -t.min_force) for t in thrusters], float)
+    r = np.array([np.hypot(t.x, t.y) for t in thrusters], float)
+    return np.array([f.sum(), f.sum(), float((f * r).sum())])
+
+
 def configuration_matrix(thrusters: list[Thruster]) -> np.ndarray:
     """B (3 × n) for fixed thrusters at their mounting angles: τ = B f (000 eq. 3)."""
     cols = []
