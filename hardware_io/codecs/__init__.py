@@ -1,0 +1,1 @@
+"""Pure codecs of the hardware-I/O layer (bytes <-> messages, no I/O)."""
