@@ -1,7 +1,5 @@
 """Thruster microcontroller protocol (hardware_io/codecs/thrust.py) and the T200 thrust curve."""
 
-import binascii
-
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -16,8 +14,15 @@ from usvdrake.vessel import load_vessel
 
 
 def _crc_oracle(body: bytes) -> int:
-    """Independent CRC-16/CCITT-FALSE: binascii's CRC-CCITT (poly 0x1021) with init 0xFFFF."""
-    return binascii.crc_hqx(body, 0xFFFF)
+    """Independent CRC-16/CCITT-FALSE, bit by bit from its definition (poly 0x1021, init
+    0xFFFF, MSB first, no final XOR); the codec uses the standard library's table version."""
+    crc = 0xFFFF
+    for byte in body:
+        crc ^= byte << 8
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x1021) if crc & 0x8000 else crc << 1
+            crc &= 0xFFFF
+    return crc
 
 
 def _crc_ok(frame: bytes) -> bool:

@@ -47,10 +47,8 @@ do not pickle, so every diagram is built inside the worker.
 
 from __future__ import annotations
 
-import base64
 import dataclasses
 import html
-import io
 import json
 import math
 import os
@@ -64,8 +62,10 @@ from pathlib import Path
 
 import numpy as np
 
+from usvdrake.jsonable import jsonable
 from usvdrake.scenario import Scenario, validate_scenario, with_overrides
 from usvdrake.typed_yaml import ConfigError
+from usvdrake.viz.report import png_base64
 
 WORKER_ENV = {  # one thread per worker for every numeric library: K workers use K cores
     "OMP_NUM_THREADS": "1",
@@ -354,7 +354,7 @@ def run_campaign(
                 rows[i].update(result)
                 if out is not None:  # as it comes: an interrupted campaign keeps its runs
                     (out / "runs" / f"run_{i:04d}.json").write_text(
-                        json.dumps(_json_safe(rows[i]), indent=1) + "\n"
+                        json.dumps(jsonable(rows[i]), indent=1) + "\n"
                     )
                 if bar is not None:
                     bar.update(1)
@@ -378,7 +378,7 @@ def run_campaign(
         "summary": summarise(rows),
         "rows": rows,
     }
-    campaign = _json_safe(campaign)
+    campaign = jsonable(campaign)
     if out is not None:
         (out / "campaign.json").write_text(json.dumps(campaign, indent=1) + "\n")
         write_campaign_report(out / "report.html", campaign)
@@ -441,26 +441,11 @@ def summarise(rows: list[dict]) -> dict:
     }
 
 
-def _json_safe(obj):
-    """Non-finite floats → None (campaign.json stays strict JSON); numpy scalars → Python."""
-    if isinstance(obj, dict):
-        return {k: _json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_json_safe(v) for v in obj]
-    if isinstance(obj, np.generic):
-        obj = obj.item()
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
-
-
 def _histogram_png(key: str, values: np.ndarray) -> str:
-    import matplotlib
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(4.2, 2.8))
+    fig = Figure(figsize=(4.2, 2.8))
+    ax = fig.subplots()
     bins = min(30, max(5, int(np.sqrt(len(values))) + 1))
     if np.ptp(values) == 0:
         bins = 1
@@ -470,10 +455,7 @@ def _histogram_png(key: str, values: np.ndarray) -> str:
     ax.set_title(key, fontsize=10)
     ax.set_ylabel("runs")
     ax.tick_params(labelsize=8)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
-    plt.close(fig)
-    return base64.b64encode(buf.getvalue()).decode()
+    return png_base64(fig, dpi=90)
 
 
 def _fmt(v) -> str:

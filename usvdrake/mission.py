@@ -17,6 +17,7 @@ from usvdrake.analysis.metrics import (
     mission_metrics,
     slam_metrics,
     tracking_metrics,
+    vessel_clearance,
 )
 from usvdrake.diagrams.vessel_diagram import build_vessel_diagram
 from usvdrake.scenario import Scenario
@@ -61,7 +62,9 @@ def _write_tum(path: Path, times: np.ndarray, states: np.ndarray) -> None:
     np.savetxt(path, rows, fmt="%.6f", header="t x y z qx qy qz qw")
 
 
-def _exploration_summary(scenario, vessel, world, autonomy, context, logs) -> dict:
+def _exploration_summary(
+    scenario, vessel, world, autonomy, context, logs, times, states, clearance
+) -> dict:
     """003's exploration metrics (:func:`exploration_metrics`) on the final SLAM map, with the
     time the explorer declared the exploration finished and which map and pose it used."""
     final_map = autonomy.GetOutputPort("slam_map").Eval(autonomy.GetMyContextFromRoot(context))
@@ -75,8 +78,6 @@ def _exploration_summary(scenario, vessel, world, autonomy, context, logs) -> di
         finished_time = float(status_log.sample_times()[done[0]])
     elif final[2] > 0:  # finished after the last log sample: the run stopped right there
         finished_time = float(context.get_time())
-    times = logs["ground_truth_state"].sample_times()
-    states = logs["ground_truth_state"].data().T
     out = exploration_metrics(
         times,
         states,
@@ -85,6 +86,7 @@ def _exploration_summary(scenario, vessel, world, autonomy, context, logs) -> di
         final_map,
         scenario.exploration.explorer.resolution,
         finished_time,
+        clearance,
     )
     out.update(
         map_source=f"slam:{scenario.slam.method}",
@@ -234,10 +236,10 @@ def run_mission(
             complete or vessel_diagram.GetOutputPort("mission_complete").Eval(vessel_context)[0] > 0
         ),
     }
+    clearance = vessel_clearance(world, states, vessel)  # once: several metrics read it
+    goals = np.asarray(scenario.mission.waypoints)
     metrics.update(
-        mission_metrics(
-            times, states, reference, thrust, vessel, world, np.asarray(scenario.mission.waypoints)
-        )
+        mission_metrics(times, states, reference, thrust, vessel, world, goals, clearance)
     )
 
     autonomy = vessel_diagram.GetSubsystemByName("autonomy")
@@ -273,7 +275,11 @@ def run_mission(
         metrics.update(slam_metrics(times, states, logs["slam_pose"].data().T, slam))
 
     if autonomy.HasSubsystemNamed("frontier_explorer"):
-        metrics.update(_exploration_summary(scenario, vessel, world, autonomy, context, logs))
+        metrics.update(
+            _exploration_summary(
+                scenario, vessel, world, autonomy, context, logs, times, states, clearance
+            )
+        )
 
     result = MissionResult(metrics, times, states, reference, thrust)
     if out_dir is not None:

@@ -22,6 +22,7 @@ frame whose CRC does not match is ever returned.
 
 from __future__ import annotations
 
+import binascii
 import enum
 import struct
 from dataclasses import dataclass
@@ -76,23 +77,10 @@ class Telemetry:
 # = 0x29B1.
 
 
-def _make_table() -> tuple[int, ...]:
-    table = []
-    for i in range(256):
-        c = i << 8
-        for _ in range(8):
-            c = ((c << 1) ^ 0x1021) if c & 0x8000 else (c << 1)
-        table.append(c & 0xFFFF)
-    return tuple(table)
-
-
-_CRC_TABLE = _make_table()
-
-
 def crc16_ccitt_false(data: bytes, crc: int = 0xFFFF) -> int:
-    for b in data:
-        crc = ((crc << 8) & 0xFFFF) ^ _CRC_TABLE[((crc >> 8) ^ b) & 0xFF]
-    return crc
+    """CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, no final XOR): the
+    standard library's CRC-CCITT (``binascii.crc_hqx``) started from 0xFFFF."""
+    return binascii.crc_hqx(data, crc)
 
 
 # ------------------------------------------------------------------------------------------

@@ -11,6 +11,12 @@ def path_length(xy: np.ndarray) -> float:
     return float(np.sum(np.linalg.norm(np.diff(xy, axis=0), axis=1))) if len(xy) > 1 else 0.0
 
 
+def vessel_clearance(world: World, states: np.ndarray, vessel: VesselParams) -> np.ndarray:
+    """Per state, the distance [m] from the vessel's hull outline to the nearest solid."""
+    hull = vessel.hull
+    return hull_clearance(world, states, hull.length, hull.beam, hull.height, hull.shape)
+
+
 def mission_metrics(
     times: np.ndarray,
     states: np.ndarray,
@@ -19,13 +25,15 @@ def mission_metrics(
     vessel: VesselParams,
     world: World,
     waypoints: np.ndarray,
+    clearance: np.ndarray | None = None,
 ) -> dict:
     """Metrics of one run. ``states`` (n × 6), ``reference`` (n × 3: ψ_d, u_d, e), ``thrust``
-    (n × command size), all sampled at ``times``."""
+    (n × command size), all sampled at ``times``; ``clearance`` (:func:`vessel_clearance` of
+    ``states``) when the caller already has it."""
     xy = states[:, :2]
     speed = np.hypot(states[:, 3], states[:, 4])
-    hull = vessel.hull
-    clearance = hull_clearance(world, states, hull.length, hull.beam, hull.height, hull.shape)
+    if clearance is None:
+        clearance = vessel_clearance(world, states, vessel)
     limits = []
     for t in vessel.thrusters:
         limits += [t.max_force, np.inf] if t.azimuth else [max(t.max_force, -t.min_force)]
@@ -201,14 +209,16 @@ def exploration_metrics(
     final_map,
     resolution: float,
     finished_time: float | None,
+    clearance: np.ndarray | None = None,
 ) -> dict:
     """003's exploration run: coverage (:func:`explored_fraction`), safety (collisions =
     episodes with the hull within 0.1 m of a solid) and the speeds of 003 Fig. 17: median
     speed inside the world's ``narrow_passage`` region and median speed while travelling
     (≥ 0.02 m/s) in open water, where the centre is ≥ 1.5 m from every solid
-    (``OPEN_WATER_CLEARANCE``)."""
+    (``OPEN_WATER_CLEARANCE``). ``clearance``: :func:`vessel_clearance` of ``states`` if known."""
     hull = vessel.hull
-    clearance = hull_clearance(world, states, hull.length, hull.beam, hull.height, hull.shape)
+    if clearance is None:
+        clearance = vessel_clearance(world, states, vessel)
     contact = clearance < CONTACT_CLEARANCE
     episodes = int(np.sum(contact[1:] & ~contact[:-1]) + (contact[0] if len(contact) else 0))
     speed = np.hypot(states[:, 3], states[:, 4])

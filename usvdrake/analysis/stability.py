@@ -114,6 +114,7 @@ from pydrake.symbolic import Polynomial, Variables
 from pydrake.systems.primitives import Linearize
 from scipy.linalg import expm, solve_continuous_lyapunov, solve_discrete_lyapunov
 
+from usvdrake.jsonable import jsonable
 from usvdrake.scenario import ControlConfig, Scenario, load_scenario
 from usvdrake.systems.control.heading_speed_law import heading_speed_tau
 from usvdrake.systems.control.nmpc_problem import NmpcConfig
@@ -1110,7 +1111,7 @@ def analyze_stability(
         "B": b.tolist(),
     }
     result["loops"] = {name: _loop_entry(c, s, d) for name, (c, s, d) in loops.items()}
-    result = _jsonable(result)
+    result = jsonable(result)
     if out_dir is not None:
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
@@ -1123,23 +1124,6 @@ def analyze_stability(
         result["files"] = [str(f) for f in files]
         (out / "analysis.json").write_text(json.dumps(result, indent=2))
     return result
-
-
-def _jsonable(obj):
-    """numpy scalars/arrays → Python; non-finite floats → None (JSON has no inf/nan)."""
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist())
-    if isinstance(obj, (bool, np.bool_)):
-        return bool(obj)
-    if isinstance(obj, (int, np.integer)):
-        return int(obj)
-    if isinstance(obj, (float, np.floating)):
-        return float(obj) if np.isfinite(obj) else None
-    return obj
 
 
 def _set_distance(a, b) -> float:

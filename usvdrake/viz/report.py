@@ -5,16 +5,13 @@ import html
 import io
 import json
 
-import matplotlib
+import numpy as np
+from matplotlib.figure import Figure
+from matplotlib.patches import Polygon
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.patches import Polygon  # noqa: E402
-
-from usvdrake.systems.vessel.thrusters import command_names  # noqa: E402
-from usvdrake.vessel import VesselParams  # noqa: E402
-from usvdrake.worlds.world import World  # noqa: E402
+from usvdrake.systems.vessel.thrusters import command_names
+from usvdrake.vessel import VesselParams
+from usvdrake.worlds.world import World
 
 KIND_COLORS = {
     "quay": "#8c735f",
@@ -37,10 +34,11 @@ def _water_patches(geom):
             yield np.asarray(p.exterior.coords), [np.asarray(r.coords) for r in p.interiors]
 
 
-def _png(fig) -> str:
+def png_base64(fig, dpi: int = 110) -> str:
+    """``fig`` (a :class:`matplotlib.figure.Figure`, no pyplot: the caller's backend, e.g. a
+    notebook's inline one, is left alone) as a base64 PNG for ``<img src="data:...">``."""
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
-    plt.close(fig)
+    fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
     return base64.b64encode(buf.getvalue()).decode()
 
 
@@ -56,7 +54,8 @@ def write_report(
     world: World,
     waypoints,
 ):
-    fig, ax = plt.subplots(figsize=(9, 6))
+    fig = Figure(figsize=(9, 6))
+    ax = fig.subplots()
     wp = np.asarray(waypoints, float).reshape(-1, 2)
     ax.set_facecolor("#d9d6cf")
     for outer, holes in _water_patches(world.water):
@@ -80,9 +79,10 @@ def write_report(
     ax.set_ylabel("y north [m]")
     ax.legend(loc="best")
     ax.set_title("Trajectory")
-    traj = _png(fig)
+    traj = png_base64(fig)
 
-    fig, axs = plt.subplots(3, 1, figsize=(9, 8), sharex=True)
+    fig = Figure(figsize=(9, 8))
+    axs = fig.subplots(3, 1, sharex=True)
     axs[0].plot(times, states[:, 3], label="u (surge)")
     axs[0].plot(times, states[:, 4], label="v (sway)")
     axs[0].plot(times, reference[:, 1], "--", label="u_d")
@@ -99,7 +99,7 @@ def write_report(
     axs[2].set_ylabel("thrust [N]")
     axs[2].set_xlabel("time [s]")
     axs[2].legend(loc="best", ncol=4)
-    signals = _png(fig)
+    signals = png_base64(fig)
 
     rows = "".join(
         f"<tr><td>{html.escape(k)}</td><td>{html.escape(json.dumps(v))}</td></tr>"

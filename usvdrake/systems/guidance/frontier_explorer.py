@@ -162,8 +162,7 @@ class FrontierExplorer(LeafSystem):
                     cfg.near_free_radius,
                 )
             except VesselOffMapError as err:
-                memory.planning_map, memory.status = None, str(err)
-                pmap = None
+                pmap, memory.status = None, str(err)
             memory.planning_map = pmap
             if pmap is not None:
                 if mode == OperatorMode.EXPLORE:

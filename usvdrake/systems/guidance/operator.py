@@ -78,7 +78,6 @@ class OperatorPanel(LeafSystem):
         self._meshcat = meshcat
         self._script = sorted(script or [], key=lambda c: c.time)
         for c in self._script:
-            parse_mode(c.mode)
             if parse_mode(c.mode) == OperatorMode.GOTO and len(c.goal) != 2:
                 raise ValueError(f"operator command at t={c.time}: goto needs goal [x, y]")
         xmin, ymin, xmax, ymax = (float(b) for b in bounds)
