@@ -21,7 +21,7 @@ class PortNotFoundError(OSError):
     """The serial port does not exist (device not plugged in, wrong path)."""
 
     def __init__(self, port: str):
-        super().__init__(f"serial port {port} not found (is the GPS plugged in?)")
+        super().__init__(f"serial port {port} not found (device not plugged in or wrong path)")
         self.port = port
 
 
@@ -112,6 +112,83 @@ class SerialTransport:
             self._serial = None
 
     def __enter__(self) -> SerialTransport:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+# ------------------------------------------------------------------------------------------
+# UDP
+
+__all__ += ["UdpTransport"]
+
+
+class UdpTransport:
+    """Non-blocking UDP socket bound to ``(address, port)``, e.g. a Velodyne's data port 2368.
+
+    ``read() -> (list[bytes], host_time)``: every datagram queued (at most ``max_datagrams``
+    per call, the rest stay queued) and ``time.monotonic()`` right after the read; ``[]`` if
+    none. The receive buffer is enlarged to :attr:`RCVBUF_BYTES` (the kernel caps it at
+    ``net.core.rmem_max``) so that a VLP-16's ~754 packets/s (0.9 MB/s) survive a slow
+    update. ``port=0`` binds an ephemeral port; :attr:`port` is the one bound. A bind
+    failure (address in use, no such interface) raises ``OSError`` with one line naming the
+    address and port. Counters: ``datagrams``, ``bytes_read``, ``errors`` (socket errors
+    other than "nothing queued" on read; the socket stays open).
+    """
+
+    RCVBUF_BYTES = 4 * 1024 * 1024
+
+    def __init__(self, address: str = "0.0.0.0", port: int = 2368, max_datagrams: int = 1000):
+        import socket
+
+        if max_datagrams < 1:
+            raise ValueError(f"max_datagrams must be positive, got {max_datagrams}")
+        self.address, self.max_datagrams = address, int(max_datagrams)
+        self.datagrams = 0
+        self.bytes_read = 0
+        self.errors = 0
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            try:
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, self.RCVBUF_BYTES)
+            except OSError:
+                pass
+            sock.bind((address, port))
+        except (OSError, OverflowError) as e:
+            sock.close()
+            reason = e.strerror if isinstance(e, OSError) and e.strerror else str(e)
+            raise OSError(f"cannot bind UDP socket to {address}:{port}: {reason}") from None
+        sock.setblocking(False)
+        self._sock: socket.socket | None = sock
+        self.port = sock.getsockname()[1]
+
+    @property
+    def connected(self) -> bool:
+        return self._sock is not None
+
+    def read(self) -> tuple[list[bytes], float]:
+        out: list[bytes] = []
+        sock = self._sock
+        while sock is not None and len(out) < self.max_datagrams:
+            try:
+                data = sock.recv(65535)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError:
+                self.errors += 1
+                break
+            out.append(data)
+            self.bytes_read += len(data)
+        self.datagrams += len(out)
+        return out, time.monotonic()
+
+    def close(self) -> None:
+        if self._sock is not None:
+            self._sock.close()
+            self._sock = None
+
+    def __enter__(self) -> UdpTransport:
         return self
 
     def __exit__(self, *exc) -> None:

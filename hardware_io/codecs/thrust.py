@@ -41,7 +41,11 @@ CMD_FLAG_ANGLES = 0x01
 TLM_FLAG_RPM = 0x01
 TLM_FLAG_PWM = 0x02
 
-WATCHDOG_TIMEOUT_S = 0.200  # MCU commands 1500 µs on every channel after 200 ms without a frame
+# MCU commands 1500 µs on every channel after 150 ms without a valid command frame: 6 lost
+# frames at the host's 50 Hz keep-alive; neutral within 150 ms + one firmware tick (≤ 10 ms)
+# of the last frame, i.e. within 200 ms of a cut link (PROTOCOL.md, "Sequence numbers and the
+# watchdog").
+WATCHDOG_TIMEOUT_S = 0.150
 
 
 class FrameError(ValueError):
@@ -51,7 +55,7 @@ class FrameError(ValueError):
 class Status(enum.IntFlag):
     """Telemetry status byte (bits 3-7 reserved, sent as 0, kept if set)."""
 
-    WATCHDOG_TRIPPED = 0x01  # no valid command for 200 ms: all channels at 1500 µs
+    WATCHDOG_TRIPPED = 0x01  # no valid command for 150 ms: all channels at 1500 µs
     ESC_FAULT = 0x02  # an ESC reported a fault / an RPM sensor reads 0 while commanded
     UNDERVOLTAGE = 0x04  # battery below the firmware's threshold
 
