@@ -58,9 +58,55 @@ def test_vessel_diagram_structure_reads_like_the_picture():
         assert d.HasOutputPort(port)
 
 
-def test_hardware_station_not_yet_available():
-    with pytest.raises(ValueError, match="hardware"):
-        build_vessel_diagram(load_scenario("canal_demo"), hardware={"port": "/dev/null"})
+def test_hardware_station_has_the_sim_station_ports_and_the_same_autonomy():
+    from hardware_io.pty_link import PtyDevice
+    from usvdrake.diagrams.hardware_station import close_hardware
+
+    s = load_scenario("river_tracking")
+    devices = {name: PtyDevice() for name in ("thrusters", "gps", "imu")}
+    hw = dataclasses.replace(
+        s.hardware,
+        **{
+            name: dataclasses.replace(getattr(s.hardware, name), port=dev.path)
+            for name, dev in devices.items()
+        },
+    )
+    hard = build_vessel_diagram(s, hardware=hw)
+    sim = build_vessel_diagram(s)
+    try:
+
+        def outputs(d):
+            return {d.get_output_port(i).get_name() for i in range(d.num_output_ports())}
+
+        assert outputs(sim) - outputs(hard) == {"ground_truth_state", "thrust_applied"}
+        assert outputs(hard) - outputs(sim) == {"gps", "imu", "watchdog_status", "thruster_link"}
+
+        def autonomy(d):
+            a = d.GetSubsystemByName("autonomy")
+            return sorted((x.get_name(), type(x).__name__) for x in a.GetSystems())
+
+        assert autonomy(hard) == autonomy(sim)
+        station = hard.GetSubsystemByName("station")
+        assert {x.get_name() for x in station.GetSystems()} == {
+            "thruster_serial_sink",
+            "gps_serial_source",
+            "imu_serial_source",
+            "gnss_imu_pose",
+            "watchdog",
+        }
+    finally:
+        close_hardware(hard)
+        for dev in devices.values():
+            dev.close()
+
+
+def test_hardware_station_errors_name_what_is_missing():
+    with pytest.raises(ValueError, match="hardware.thrusters.port"):
+        build_vessel_diagram(load_scenario("canal_demo"), hardware=True)
+    s = load_scenario("river_tracking")
+    no_imu = dataclasses.replace(s.hardware, imu=dataclasses.replace(s.hardware.imu, port=""))
+    with pytest.raises(ValueError, match="pose_measurement .fit hardware.gps and hardware.imu"):
+        build_vessel_diagram(s, hardware=no_imu)
 
 
 def test_state_lives_in_the_context():

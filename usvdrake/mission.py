@@ -98,6 +98,39 @@ def _exploration_summary(
     return out
 
 
+def control_estimation_metrics(
+    autonomy, context, times, states, estimates, pose=None, nmhe_solve_ms=None
+) -> dict:
+    """NMPC tracking RMSE and solve statistics, NMHE estimation errors and solve times, for the
+    systems ``autonomy`` holds (empty if neither). ``times``/``states``: ground truth samples;
+    ``estimates``: the logged ``state_estimate`` at those times; ``pose``: the logged pose
+    measurements; ``nmhe_solve_ms``: the logged ``nmhe_solve_ms`` output."""
+    out = {}
+    if autonomy.HasSubsystemNamed("nmpc"):
+        nmpc = autonomy.GetSubsystemByName("nmpc")
+        memory = nmpc.memory(nmpc.GetMyContextFromRoot(context))
+        solve_ms = np.asarray(memory.solve_ms) if memory.solve_ms else np.zeros(1)
+        out.update(tracking_metrics(times, states, nmpc.reference))
+        out.update(
+            nmpc_failures=int(memory.failures),
+            nmpc_solves=len(memory.solve_ms),
+            nmpc_solve_ms_median=float(np.median(solve_ms)),
+            nmpc_solve_ms_p95=float(np.percentile(solve_ms, 95)),
+        )
+    if autonomy.HasSubsystemNamed("nmhe"):
+        out.update(estimation_metrics(times, states, estimates, pose))
+        nmhe = autonomy.GetSubsystemByName("nmhe")
+        diag = nmhe.diagnostics(nmhe.GetMyContextFromRoot(context))
+        ms = np.zeros(0) if nmhe_solve_ms is None else np.asarray(nmhe_solve_ms)
+        ms = ms[ms > 0]
+        out.update(
+            nmhe_failures=diag["failures"],
+            nmhe_solve_ms_median=float(np.median(ms)) if len(ms) else 0.0,
+            nmhe_solve_ms_max=diag["max_ms"],
+        )
+    return out
+
+
 def run_mission(
     scenario: Scenario,
     out_dir: str | Path | None = None,
@@ -136,28 +169,12 @@ def run_mission(
         logger.set_name(f"log_{name}")
     log_writer = None
     if out_dir is not None:
-        from usvdrake.logs.mission_log import MissionLogWriter, MissionRecorder
+        from usvdrake.logs.mission_log import MissionLogWriter, add_mission_recorder
 
         Path(out_dir).mkdir(parents=True, exist_ok=True)
+        # written while the simulation runs (flushed every 0.5 s): a crash keeps all but ~1 s
         log_writer = MissionLogWriter(Path(out_dir) / "log.mcap")
-        scan_period = None
-        if vessel_diagram.HasOutputPort("lidar_scan"):
-            from usvdrake.sensors.lidar_model import preset_by_name
-
-            lidar = scenario.sensors.lidar2d
-            scan_period = 1.0 / (lidar.rate_hz or preset_by_name(lidar.preset).rate_hz)
-        recorder = builder.AddNamedSystem(
-            "mission_recorder",
-            MissionRecorder(log_writer, scenario.visualization.rate_hz, scan_period),
-        )
-        builder.Connect(
-            vessel_diagram.GetOutputPort("ground_truth_state"),
-            recorder.GetInputPort("ground_truth_state"),
-        )
-        if scan_period is not None:
-            builder.Connect(
-                vessel_diagram.GetOutputPort("lidar_scan"), recorder.GetInputPort("lidar_scan")
-            )
+        add_mission_recorder(builder, vessel_diagram, log_writer, scenario.visualization.rate_hz)
     diagram = builder.Build()
     diagram.set_name("mission")
 
@@ -193,25 +210,27 @@ def run_mission(
             bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]",
         )
     wall0 = time.perf_counter()
-    simulator.Initialize()
-    step = max(0.5, scenario.duration / 200.0)
     t = 0.0
     complete = False
-    while t < scenario.duration - 1e-9:
-        target = min(t + step, scenario.duration)
-        status = simulator.AdvanceTo(target)
-        new_t = context.get_time()
+    try:
+        simulator.Initialize()
+        step = max(0.5, scenario.duration / 200.0)
+        while t < scenario.duration - 1e-9:
+            target = min(t + step, scenario.duration)
+            status = simulator.AdvanceTo(target)
+            new_t = context.get_time()
+            if bar is not None:
+                bar.update(new_t - t)
+            t = new_t
+            if status.reason() == SimulatorStatus.ReturnReason.kReachedTerminationCondition:
+                complete = True
+                break
+    finally:  # an interrupted or failed run still leaves a finished, readable log
         if bar is not None:
-            bar.update(new_t - t)
-        t = new_t
-        if status.reason() == SimulatorStatus.ReturnReason.kReachedTerminationCondition:
-            complete = True
-            break
+            bar.close()
+        if log_writer is not None:
+            log_writer.close()
     wall = time.perf_counter() - wall0
-    if bar is not None:
-        bar.close()
-    if log_writer is not None:
-        log_writer.close()
 
     if meshcat is not None:
         viz = vessel_diagram.GetSubsystemByName("vessel_visualizer")
@@ -243,31 +262,17 @@ def run_mission(
     )
 
     autonomy = vessel_diagram.GetSubsystemByName("autonomy")
-    if autonomy.HasSubsystemNamed("nmpc"):
-        nmpc = autonomy.GetSubsystemByName("nmpc")
-        memory = nmpc.memory(nmpc.GetMyContextFromRoot(context))
-        solve_ms = np.asarray(memory.solve_ms) if memory.solve_ms else np.zeros(1)
-        metrics.update(tracking_metrics(times, states, nmpc.reference))
-        metrics.update(
-            nmpc_failures=int(memory.failures),
-            nmpc_solves=len(memory.solve_ms),
-            nmpc_solve_ms_median=float(np.median(solve_ms)),
-            nmpc_solve_ms_p95=float(np.percentile(solve_ms, 95)),
+    metrics.update(
+        control_estimation_metrics(
+            autonomy,
+            context,
+            times,
+            states,
+            logs["state_estimate"].data().T,
+            logs["pose_measurement"].data().T if "pose_measurement" in logs else None,
+            logs["nmhe_solve_ms"].data().ravel() if "nmhe_solve_ms" in logs else None,
         )
-
-    if autonomy.HasSubsystemNamed("nmhe"):
-        estimates = logs["state_estimate"].data().T
-        pose = logs["pose_measurement"].data().T if "pose_measurement" in logs else None
-        metrics.update(estimation_metrics(times, states, estimates, pose))
-        nmhe = autonomy.GetSubsystemByName("nmhe")
-        diag = nmhe.diagnostics(nmhe.GetMyContextFromRoot(context))
-        ms = logs["nmhe_solve_ms"].data().ravel()
-        ms = ms[ms > 0]
-        metrics.update(
-            nmhe_failures=diag["failures"],
-            nmhe_solve_ms_median=float(np.median(ms)) if len(ms) else 0.0,
-            nmhe_solve_ms_max=diag["max_ms"],
-        )
+    )
 
     if autonomy.HasSubsystemNamed("lidar_slam_2d"):
         slam_sys = autonomy.GetSubsystemByName("lidar_slam_2d")

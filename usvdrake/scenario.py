@@ -167,6 +167,39 @@ class ExplorationConfig:
 
 
 @dataclass
+class SerialDeviceConfig:
+    """A device on a serial port (hardware station). An empty ``port`` means not fitted."""
+
+    port: str = ""  # device path, e.g. /dev/serial/by-id/usb-u-blox_GNSS-if00
+    baudrate: int = 115200  # [bit/s]
+    protocol: str = ""  # lidar2d only: 'rplidar' (Slamtec A1, 003) or 'scip' (Hokuyo, 002)
+
+
+@dataclass
+class UdpDeviceConfig:
+    """A device sending UDP datagrams (Velodyne). An empty ``address`` means not fitted."""
+
+    address: str = ""  # local address to bind, e.g. 0.0.0.0
+    port: int = 2368  # [-] VLP-16 data port
+
+
+@dataclass
+class HardwareConfig:
+    """The hardware station of ``build_vessel_diagram(scenario, hardware=...)``: which devices
+    sit on which ports. The station exports the same port names as the simulated one."""
+
+    thrusters: SerialDeviceConfig = field(default_factory=SerialDeviceConfig)
+    gps: SerialDeviceConfig = field(default_factory=SerialDeviceConfig)
+    imu: SerialDeviceConfig = field(default_factory=SerialDeviceConfig)
+    lidar2d: SerialDeviceConfig = field(default_factory=SerialDeviceConfig)
+    lidar3d: UdpDeviceConfig = field(default_factory=UdpDeviceConfig)
+    command_rate_hz: float = 50.0  # [Hz] command frames to the thruster MCU (keep-alive)
+    stale_timeout: float = 0.3  # [s] wall time without a fresh command → neutral frames
+    sensor_timeout: float = 0.5  # [s] a required sensor silent this long → zero thrust
+    poll_period: float = 0.01  # [s] how often the serial sources read their ports
+
+
+@dataclass
 class Scenario:
     name: str = ""  # short identifier (defaults to the file name)
     description: str = ""  # one line for humans
@@ -195,6 +228,7 @@ class Scenario:
     control: ControlConfig = field(default_factory=ControlConfig)
     visualization: VisualizationConfig = field(default_factory=VisualizationConfig)
     simulation: SimulationConfig = field(default_factory=SimulationConfig)
+    hardware: HardwareConfig = field(default_factory=HardwareConfig)
 
 
 # Scenario values that must be > 0, and >= 0 (dotted keys, checked by validate_scenario).
@@ -428,6 +462,21 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
             repr(s.sensors.gps.datum),
         )
     _check_free_water(s, file, make_world(s.world, s.seed))
+    hw = s.hardware
+    for key in ("command_rate_hz", "stale_timeout", "sensor_timeout", "poll_period"):
+        _positive(file, f"hardware.{key}", getattr(hw, key))
+    if hw.lidar2d.port and hw.lidar2d.protocol not in ("rplidar", "scip"):
+        raise ConfigError(
+            file, "hardware.lidar2d.protocol", "'rplidar' or 'scip'", repr(hw.lidar2d.protocol)
+        )
+    for key in ("thrusters", "gps", "imu", "lidar2d"):
+        if getattr(hw, key).baudrate <= 0:
+            raise ConfigError(
+                file,
+                f"hardware.{key}.baudrate",
+                "a positive integer",
+                repr(getattr(hw, key).baudrate),
+            )
     return s
 
 

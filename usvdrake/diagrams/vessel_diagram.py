@@ -18,18 +18,31 @@ def build_vessel_diagram(
     Exports the station's ports (``thrust_measured``, ``ground_truth_state``) and the autonomy's
     (``thruster_command``, ``mission_complete``, ``reference``, ``tau_desired``, ``tau_achieved``,
     ``state_estimate``) at the top level. With ``meshcat``, a ``VesselVisualizer`` draws the hull,
-    thrust arrows and trail, and the world is drawn once. ``hardware`` is reserved for the
-    hardware-I/O issue: the station is then built from serial/UDP systems with the same ports.
+    thrust arrows and trail, and the world is drawn once.
+
+    ``hardware``: None simulates the station (plant, environment, simulated sensors). True (the
+    scenario's ``hardware`` section) or a :class:`~usvdrake.scenario.HardwareConfig` builds the
+    hardware station instead (:mod:`usvdrake.diagrams.hardware_station`: serial/UDP devices
+    with the same port names, a watchdog, no ``ground_truth_state``); the autonomy half is the
+    same. Meshcat then draws the vessel at its *estimated* state.
     """
-    if hardware is not None:
-        raise ValueError("hardware stations are not available in this version (simulation only)")
     vessel = load_vessel(scenario.vessel)  # nominal: the station applies scenario.model_error
     world = make_world(scenario.world, scenario.seed)
     builder = DiagramBuilder()
-    station = builder.AddNamedSystem("station", make_sim_station(scenario, vessel, world))
-    autonomy = builder.AddNamedSystem(
-        "autonomy", make_autonomy(scenario, vessel, world, meshcat=meshcat)
-    )
+    autonomy_system = make_autonomy(scenario, vessel, world, meshcat=meshcat)
+    needs = [
+        autonomy_system.get_input_port(i).get_name()
+        for i in range(autonomy_system.num_input_ports())
+    ]
+    if hardware is None:
+        station_system = make_sim_station(scenario, vessel, world)
+    else:
+        from usvdrake.diagrams.hardware_station import make_hardware_station
+
+        hw = scenario.hardware if hardware is True else hardware
+        station_system = make_hardware_station(scenario, vessel, world, hw, needs)
+    station = builder.AddNamedSystem("station", station_system)
+    autonomy = builder.AddNamedSystem("autonomy", autonomy_system)
     builder.Connect(
         autonomy.GetOutputPort("thruster_command"), station.GetInputPort("thruster_command")
     )
@@ -50,6 +63,12 @@ def build_vessel_diagram(
         builder.ExportOutput(autonomy.get_output_port(i), name)
 
     if meshcat is not None:
+        # the drawn pose: the truth in simulation, the estimate on the water
+        drawn_state = (
+            station.GetOutputPort("ground_truth_state")
+            if station.HasOutputPort("ground_truth_state")
+            else autonomy.GetOutputPort("state_estimate")
+        )
         from usvdrake.viz.lidar_visualizer import LidarVisualizer
         from usvdrake.viz.meshcat_world import draw_occupancy, draw_world, look_at
         from usvdrake.viz.vessel_visualizer import VesselVisualizer
@@ -91,9 +110,7 @@ def build_vessel_diagram(
                     hits = builder.AddNamedSystem(
                         f"{name}_visualizer", LidarVisualizer(meshcat, name, cfg.mount, three_d)
                     )
-                    builder.Connect(
-                        station.GetOutputPort("ground_truth_state"), hits.GetInputPort("state")
-                    )
+                    builder.Connect(drawn_state, hits.GetInputPort("state"))
                     builder.Connect(station.GetOutputPort(port), hits.GetInputPort("lidar"))
         x0, y0 = scenario.initial_state[:2]
         look_at(meshcat, [x0, y0, 0.0], distance=max(20.0 * vessel.hull.length, 8.0))
@@ -101,7 +118,7 @@ def build_vessel_diagram(
             "vessel_visualizer",
             VesselVisualizer(meshcat, vessel, scenario.visualization, scenario.mission.waypoints),
         )
-        builder.Connect(station.GetOutputPort("ground_truth_state"), viz.GetInputPort("state"))
+        builder.Connect(drawn_state, viz.GetInputPort("state"))
         builder.Connect(
             station.GetOutputPort("thrust_measured"), viz.GetInputPort("thrust_applied")
         )

@@ -1,0 +1,366 @@
+"""``run_hil``: the hardware diagram against emulated devices, in real time (``usvdrake hil``).
+
+Two processes, as on the boat: the *rig* (:mod:`hardware_io.emulators.rig`) simulates the vessel
+and world behind a thruster microcontroller, a GNSS receiver and an IMU on pseudo-terminals; this
+process builds ``build_vessel_diagram(scenario, hardware=...)`` with those ports — the hardware
+station of serial systems plus the *same* autonomy objects as in simulation — and runs it paced
+to the wall clock (Simulator target real-time rate 1).
+
+Ground truth exists only in the rig. Both processes stamp samples with ``time.monotonic()``
+(one system-wide clock on Linux), so afterwards the truth is put on this process's simulation
+clock and scored against the reference exactly as ``usvdrake run`` scores a simulation.
+
+After ``duration`` the thruster wire is cut (``cut_link``): the metric ``watchdog_latency_ms``
+is the time from the cut until the emulated microcontroller outputs neutral PWM.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import select
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from pydrake.systems.analysis import Simulator, SimulatorStatus
+from pydrake.systems.framework import DiagramBuilder, EventStatus, LeafSystem
+from pydrake.systems.primitives import LogVectorOutput
+
+from usvdrake.scenario import Scenario
+
+__all__ = ["HilResult", "run_hil"]
+
+READY_TIMEOUT_S = 120.0  # the rig imports Drake and builds the world before it is ready
+CUT_OBSERVATION_S = 1.0  # [s] kept running after the cut so the watchdog is seen
+
+
+class ClockRecorder(LeafSystem):
+    """(simulation time, ``time.monotonic()``) pairs at ``rate_hz`` in :attr:`rows`; with a
+    mission log ``writer`` also the topic ``/hil/clock`` (``unix_time``, ``monotonic`` [s]) so a
+    log says which wall-clock moment each simulation time was."""
+
+    def __init__(self, rate_hz: float = 20.0, writer=None):
+        super().__init__()
+        self.rows: list[tuple[float, float]] = []
+        self._writer = writer
+        self.DeclarePeriodicPublishEvent(1.0 / rate_hz, 0.0, self._record)
+
+    def _record(self, context):
+        t, mono = context.get_time(), time.monotonic()
+        self.rows.append((t, mono))
+        if self._writer is not None:
+            self._writer.write_vector(
+                "/hil/clock", t, [time.time(), mono], names=("unix_time", "monotonic")
+            )
+
+
+@dataclass
+class HilResult:
+    metrics: dict
+    times: np.ndarray  # [s] host simulation time of the samples
+    states: np.ndarray  # (n × 6) ground truth from the rig on the host clock
+    files: dict = field(default_factory=dict)
+
+
+class RigProcess:
+    """The rig as a child process: ``ports`` once ready, ``send(line)``, ``stop() -> report``."""
+
+    def __init__(self, scenario_yaml: Path, report: Path, corruption: float):
+        self.report_path = report
+        cmd = [sys.executable, "-m", "hardware_io.emulators.rig", str(scenario_yaml)]
+        cmd += ["--corrupt", repr(corruption), "--report", str(report)]
+        self.proc = subprocess.Popen(
+            cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+        )
+        self.ports = self._wait_ready()
+
+    def _wait_ready(self) -> dict[str, str]:
+        deadline = time.monotonic() + READY_TIMEOUT_S
+        buf = b""
+        while time.monotonic() < deadline:
+            ready, _, _ = select.select([self.proc.stdout], [], [], 0.2)
+            if ready:
+                chunk = self.proc.stdout.readline()
+                buf += chunk
+                if chunk.strip():
+                    return json.loads(chunk)["ports"]
+            if self.proc.poll() is not None:
+                err = self.proc.stderr.read().decode(errors="replace").strip().splitlines()
+                raise RuntimeError(
+                    "HIL rig exited before it was ready: " + (err[-1] if err else "no output")
+                )
+        self.proc.kill()
+        raise RuntimeError(f"HIL rig not ready after {READY_TIMEOUT_S:.0f} s")
+
+    def send(self, line: str) -> None:
+        self.proc.stdin.write(line.encode() + b"\n")
+        self.proc.stdin.flush()
+
+    def stop(self, timeout: float = 30.0) -> dict:
+        if self.proc.poll() is None:
+            try:
+                self.send("stop")
+                self.proc.stdin.close()
+            except (BrokenPipeError, OSError):
+                pass
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        if self.proc.returncode != 0:
+            err = self.proc.stderr.read().decode(errors="replace").strip().splitlines()
+            raise RuntimeError(f"HIL rig failed: {err[-1] if err else self.proc.returncode}")
+        return json.loads(self.report_path.read_text())
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+
+
+def truth_on_host_clock(report: dict, clock: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """The rig's truth (rows ``[wall, sim, x, y, ψ, u, v, r]``) at host simulation ``times``,
+    through the host's (simulation time, wall time) pairs ``clock``: linear interpolation in
+    wall time, ψ unwrapped first and wrapped back."""
+    truth = np.asarray(report["truth"], float)
+    wall_of = np.interp(times, clock[:, 0], clock[:, 1])
+    q = truth[:, 2:].copy()
+    q[:, 2] = np.unwrap(q[:, 2])
+    out = np.column_stack([np.interp(wall_of, truth[:, 0], q[:, k]) for k in range(6)])
+    out[:, 2] = np.angle(np.exp(1j * out[:, 2]))
+    return out
+
+
+def watchdog_latency_ms(report: dict) -> float | None:
+    """Milliseconds from the wire cut to the first watchdog trip after it (None: no cut, or
+    the microcontroller never went to neutral — a failure the caller reports)."""
+    cut = report.get("cut_time")
+    if cut is None:
+        return None
+    trips = [t for t in report.get("watchdog_trips", []) if t >= cut]
+    return 1000.0 * (min(trips) - cut) if trips else None
+
+
+def run_hil(
+    scenario: Scenario,
+    out_dir: str | Path,
+    duration: float | None = None,
+    corruption: float = 0.0,
+    cut_link: bool = True,
+    compare_sim: bool = True,
+    progress: bool = False,
+    meshcat=None,
+    emulated: bool = True,
+) -> HilResult:
+    """Run ``scenario``'s hardware diagram against the rig for ``duration`` s of wall time.
+
+    ``emulated=False`` runs it against the real devices on the ports of the scenario's
+    ``hardware`` section instead (no rig: no truth, so only the host's own metrics); a port
+    that does not exist stops it with one line before anything moves.
+
+    Writes ``metrics.json``, ``log.mcap`` (the host's inputs, outputs and estimates),
+    ``rig_report.json`` and ``scenario.yaml`` to ``out_dir``. With ``compare_sim`` the same
+    scenario is also simulated (no hardware, as fast as possible) over the same duration and
+    ``position_rmse_ratio_vs_sim`` compares the two.
+    """
+    from usvdrake.campaign import scenario_yaml
+    from usvdrake.diagrams.hardware_station import close_hardware
+    from usvdrake.diagrams.vessel_diagram import build_vessel_diagram
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    duration = float(duration if duration is not None else scenario.duration)
+    scenario = dataclasses.replace(scenario, duration=duration)
+    (out / "scenario.yaml").write_text(scenario_yaml(scenario))
+    hw = scenario.hardware
+    rig = None
+    if emulated:
+        rig = RigProcess(out / "scenario.yaml", out / "rig_report.json", corruption)
+        hw = dataclasses.replace(
+            hw,
+            thrusters=dataclasses.replace(hw.thrusters, port=rig.ports["thrusters"]),
+            gps=dataclasses.replace(hw.gps, port=rig.ports["gps"]),
+            imu=dataclasses.replace(hw.imu, port=rig.ports["imu"]),
+        )
+    log_writer = None
+    try:
+        builder = DiagramBuilder()
+        vessel = builder.AddNamedSystem(
+            "vessel", build_vessel_diagram(scenario, meshcat=meshcat, hardware=hw)
+        )
+        log_writer = _add_log(builder, vessel, out / "log.mcap", scenario)
+        clock = builder.AddNamedSystem("clock_recorder", ClockRecorder(writer=log_writer))
+        period = 1.0 / scenario.visualization.rate_hz
+        logged = [
+            p
+            for p in (
+                "reference",
+                "state_estimate",
+                "thruster_command",
+                "thrust_measured",
+                "pose_measurement",
+                "nmhe_solve_ms",
+                "watchdog_status",
+                "thruster_link",
+            )
+            if vessel.HasOutputPort(p)
+        ]
+        loggers = {p: LogVectorOutput(vessel.GetOutputPort(p), builder, period) for p in logged}
+        diagram = builder.Build()
+        diagram.set_name("hil_mission")
+
+        simulator = Simulator(diagram)
+        simulator.set_target_realtime_rate(1.0)
+        context = simulator.get_mutable_context()
+        complete = vessel.GetOutputPort("mission_complete")
+
+        def monitor(root):
+            if complete.Eval(vessel.GetMyContextFromRoot(root))[0] > 0:
+                return EventStatus.ReachedTermination(diagram, "mission complete")
+            return EventStatus.Succeeded()
+
+        simulator.set_monitor(monitor)
+        bar = None
+        if progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=duration, unit="s", bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} s")
+        wall0 = time.perf_counter()
+        simulator.Initialize()
+        t = 0.0
+        while t < duration - 1e-9:
+            status = simulator.AdvanceTo(min(t + 0.5, duration))
+            if bar is not None:
+                bar.update(context.get_time() - t)
+            t = context.get_time()
+            if status.reason() == SimulatorStatus.ReturnReason.kReachedTerminationCondition:
+                break
+        tracked_until = t
+        lag_s = (time.perf_counter() - wall0) - t
+        if cut_link and rig is not None:
+            rig.send("cut thrusters")
+            simulator.set_monitor(lambda root: EventStatus.Succeeded())
+            simulator.AdvanceTo(t + CUT_OBSERVATION_S)
+        if bar is not None:
+            bar.close()
+        wall = time.perf_counter() - wall0
+        report = rig.stop() if rig is not None else None
+        host_status = _hardware_status(vessel, context)
+        close_hardware(diagram)
+        log_writer.close()
+    except BaseException:
+        if rig is not None:
+            rig.kill()
+        if log_writer is not None:
+            log_writer.close()
+        raise
+
+    logs = {p: lg.FindLog(context) for p, lg in loggers.items()}
+    metrics = {
+        "scenario": scenario.name,
+        "mode": "hil" if rig is not None else "devices",
+        "duration_s": duration,
+        "tracked_until_s": float(tracked_until),
+        "wall_time_s": float(wall),
+        "realtime_lag_s": float(lag_s),
+        "byte_corruption": corruption if rig is not None else None,
+    }
+    metrics.update(host_status)
+    if "thruster_command" in logs:
+        metrics["thrust_abs_max_n"] = float(np.max(np.abs(logs["thruster_command"].data())))
+    times = logs["state_estimate"].sample_times()
+    keep = times <= tracked_until + 1e-9
+    times, states = times[keep], None
+    if report is not None:
+        states = truth_on_host_clock(report, np.asarray(clock.rows, float), times)
+        metrics.update(_truth_metrics(vessel, context, logs, keep, times, states, report))
+        if compare_sim:
+            from usvdrake.mission import run_mission
+
+            sim = run_mission(dataclasses.replace(scenario, duration=tracked_until), record=False)
+            metrics["sim_position_rmse_m"] = sim.metrics.get("position_rmse_m")
+            metrics["sim_heading_rmse_rad"] = sim.metrics.get("heading_rmse_rad")
+            if metrics.get("position_rmse_m") is not None and metrics["sim_position_rmse_m"]:
+                metrics["position_rmse_ratio_vs_sim"] = (
+                    metrics["position_rmse_m"] / metrics["sim_position_rmse_m"]
+                )
+
+    from usvdrake.jsonable import jsonable
+
+    (out / "metrics.json").write_text(json.dumps(jsonable(metrics), indent=2) + "\n")
+    files = {"metrics": out / "metrics.json", "log": out / "log.mcap"}
+    if rig is not None:
+        files["rig_report"] = out / "rig_report.json"
+    files["scenario"] = out / "scenario.yaml"
+    return HilResult(metrics, times, states, files)
+
+
+def _truth_metrics(vessel, context, logs, keep, times, states, report) -> dict:
+    """Tracking and estimation against the rig's truth, the watchdog and the wires."""
+    from usvdrake.mission import control_estimation_metrics
+
+    def logged(name):
+        return logs[name].data().T[keep] if name in logs else None
+
+    nmhe_ms = logged("nmhe_solve_ms")
+    out = control_estimation_metrics(
+        vessel.GetSubsystemByName("autonomy"),
+        context,
+        times,
+        states,
+        logged("state_estimate"),
+        logged("pose_measurement"),
+        None if nmhe_ms is None else nmhe_ms.ravel(),
+    )
+    cut = report["cut_time"]
+    out["watchdog_latency_ms"] = watchdog_latency_ms(report)
+    last = report.get("last_command_before_cut")
+    trips = [t for t in report["watchdog_trips"] if cut is not None and t >= cut]
+    if last is not None and trips:  # the firmware rule itself: ≤ 150 ms + one tick
+        out["watchdog_after_last_frame_ms"] = 1000.0 * (min(trips) - last)
+    out["watchdog_trips_before_cut"] = sum(
+        1 for tr in report["watchdog_trips"] if cut is None or tr < cut
+    )
+    for name, wire in report["wires"].items():
+        out[f"wire_{name}_bytes_corrupted"] = wire["bytes_corrupted"]
+        out[f"wire_{name}_bytes_to_host"] = wire["bytes_out"]
+    out["mcu_frames_ok"] = report["mcu"]["frames_ok"]
+    out["mcu_frames_rejected"] = report["mcu"]["frames_rejected"]
+    return out
+
+
+def _hardware_status(vessel, context) -> dict:
+    """Counters of the host's serial systems at the end of the run."""
+    out = {}
+    station = vessel.GetSubsystemByName("station")
+    for name in ("gps_serial_source", "imu_serial_source", "lidar_serial_source"):
+        if station.HasSubsystemNamed(name):
+            system = station.GetSubsystemByName(name)
+            status = system.status(system.GetMyContextFromRoot(context))
+            for key, value in dataclasses.asdict(status).items():
+                out[f"{name.removesuffix('_serial_source')}_{key}"] = value
+    sink = station.GetSubsystemByName("thruster_serial_sink")
+    link = sink.status(sink.GetMyContextFromRoot(context))
+    out.update(
+        thruster_telemetry_frames=link.telemetry_frames,
+        thruster_crc_errors=link.crc_errors,
+        thruster_frame_errors=link.frame_errors,
+        thruster_frames_sent=sink.frames_sent,
+        thruster_neutral_frames=sink.neutral_frames,
+        thruster_stale_events=sink.stale_events,
+    )
+    return out
+
+
+def _add_log(builder, vessel, path: Path, scenario):
+    """The mission log (``log.mcap``) of the host diagram: its writer, recorder attached."""
+    from usvdrake.logs.mission_log import MissionLogWriter, add_mission_recorder
+
+    writer = MissionLogWriter(path)
+    add_mission_recorder(builder, vessel, writer, scenario.visualization.rate_hz)
+    return writer
