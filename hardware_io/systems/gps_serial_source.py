@@ -6,10 +6,9 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
-from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import LeafSystem
 
 from hardware_io.codecs.nmea import GGA, RMC, VTG, NmeaError, NmeaStream, decode
+from hardware_io.systems.device_source import DeviceSource
 from hardware_io.transport import SerialTransport
 from usvdrake.sensors.geodesy import Datum, datum_by_name
 from usvdrake.sensors.messages import GpsFix
@@ -40,7 +39,7 @@ class GpsSerialStatus:
     fixes: int = 0  #: GGA sentences applied to the fix
 
 
-class GpsSerialSource(LeafSystem):
+class GpsSerialSource(DeviceSource[GpsFix, GpsSerialStatus]):
     """Fixes from an NMEA receiver on ``port``.
 
     .. pydrake_system::
@@ -64,9 +63,9 @@ class GpsSerialSource(LeafSystem):
 
     ``time`` is the simulation time of the update that received the sentence. The fix and the
     :class:`GpsSerialStatus` counters are abstract state; the transport and the partial-line
-    buffer are I/O and live on the system object, not in the Context. So contexts of this
-    system are not independent (all share the one port), and the system cannot be cloned or
-    pickled across processes. Call :meth:`close` to release the port.
+    buffer are I/O on the system object, as for every
+    :class:`~hardware_io.systems.device_source.DeviceSource` (contexts share the one port; call
+    :meth:`close` to release it).
     """
 
     def __init__(
@@ -77,25 +76,17 @@ class GpsSerialSource(LeafSystem):
         period: float = 0.05,
         transport: SerialTransport | None = None,
     ):
-        super().__init__()
         self.datum = datum_by_name(datum) if isinstance(datum, str) else datum
-        self.transport = transport if transport is not None else SerialTransport(port, baudrate)
         self._stream = NmeaStream()
-        self._fix = self.DeclareAbstractState(AbstractValue.Make(GpsFix()))
-        self._status = self.DeclareAbstractState(AbstractValue.Make(GpsSerialStatus()))
-        self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
-        self.DeclareStateOutputPort("gps", self._fix)
+        super().__init__(
+            transport if transport is not None else SerialTransport(port, baudrate),
+            "gps",
+            GpsFix(),
+            GpsSerialStatus(),
+            period,
+        )
 
-    def status(self, context) -> GpsSerialStatus:
-        return context.get_abstract_state(self._status).get_value()
-
-    def close(self) -> None:
-        self.transport.close()
-
-    def _update(self, context, state):
-        t = context.get_time()
-        fix = context.get_abstract_state(self._fix).get_value()
-        st = context.get_abstract_state(self._status).get_value()
+    def poll(self, t: float, fix: GpsFix, st: GpsSerialStatus) -> tuple[GpsFix, GpsSerialStatus]:
         data, _host_time = self.transport.read()
         sentences = self._stream.feed(data) if data else []
         bad = fixes = 0
@@ -122,8 +113,7 @@ class GpsSerialSource(LeafSystem):
             bad_sentences=st.bad_sentences + bad,
             fixes=st.fixes + fixes,
         )
-        state.get_mutable_abstract_state(self._fix).set_value(fix)
-        state.get_mutable_abstract_state(self._status).set_value(st)
+        return fix, st
 
 
 def _apply_gga(fix: GpsFix, m: GGA, t: float) -> GpsFix:

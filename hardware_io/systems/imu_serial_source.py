@@ -4,11 +4,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import LeafSystem
-
 from hardware_io.codecs.imu import MtError, MtStream, encode_frame, to_imu_sample
 from hardware_io.devices import MID_GOTO_MEASUREMENT
+from hardware_io.systems.device_source import DeviceSource
 from hardware_io.transport import SerialTransport
 from usvdrake.sensors.messages import ImuSample
 
@@ -33,7 +31,7 @@ class ImuSerialStatus:
     requests_sent: int = 0  #: GoToMeasurement requests written
 
 
-class ImuSerialSource(LeafSystem):
+class ImuSerialSource(DeviceSource[ImuSample, ImuSerialStatus]):
     """Samples from an Xsens MTi (MTData2 output) on ``port``.
 
     .. pydrake_system::
@@ -56,9 +54,9 @@ class ImuSerialSource(LeafSystem):
     ``frames`` but not ``samples``.
 
     The sample and the :class:`ImuSerialStatus` counters are abstract state; the transport and
-    the stream parser's partial-message buffer are I/O and live on the system object, not in the
-    Context. So contexts of this system are not independent (all share the one port), and the
-    system cannot be cloned or pickled across processes. Call :meth:`close` to release the port.
+    the stream parser's partial-message buffer are I/O on the system object, as for every
+    :class:`~hardware_io.systems.device_source.DeviceSource` (contexts share the one port; call
+    :meth:`close` to release it).
     """
 
     def __init__(
@@ -68,24 +66,18 @@ class ImuSerialSource(LeafSystem):
         period: float = 0.01,
         transport: SerialTransport | None = None,
     ):
-        super().__init__()
-        self.transport = transport if transport is not None else SerialTransport(port, baudrate)
+        super().__init__(
+            transport if transport is not None else SerialTransport(port, baudrate),
+            "imu",
+            ImuSample(),
+            ImuSerialStatus(),
+            period,
+        )
         self._stream = MtStream()
-        self._sample = self.DeclareAbstractState(AbstractValue.Make(ImuSample()))
-        self._status = self.DeclareAbstractState(AbstractValue.Make(ImuSerialStatus()))
-        self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
-        self.DeclareStateOutputPort("imu", self._sample)
 
-    def status(self, context) -> ImuSerialStatus:
-        return context.get_abstract_state(self._status).get_value()
-
-    def close(self) -> None:
-        self.transport.close()
-
-    def _update(self, context, state):
-        t = context.get_time()
-        sample = context.get_abstract_state(self._sample).get_value()
-        st = context.get_abstract_state(self._status).get_value()
+    def poll(
+        self, t: float, sample: ImuSample, st: ImuSerialStatus
+    ) -> tuple[ImuSample, ImuSerialStatus]:
         requests = st.requests_sent
         if requests == 0:
             self.transport.write(GOTO_MEASUREMENT)
@@ -116,5 +108,4 @@ class ImuSerialSource(LeafSystem):
             last_packet_counter=counter,
             requests_sent=requests,
         )
-        state.get_mutable_abstract_state(self._sample).set_value(sample)
-        state.get_mutable_abstract_state(self._status).set_value(st)
+        return sample, st

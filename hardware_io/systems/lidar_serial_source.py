@@ -5,11 +5,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import LeafSystem
-
 from hardware_io.codecs import rplidar as rp
 from hardware_io.codecs import scip
+from hardware_io.systems.device_source import DeviceSource
 from hardware_io.transport import SerialTransport
 from usvdrake.sensors.messages import LaserScan
 
@@ -164,7 +162,7 @@ class SalvagingScipStream(scip.ScipStream):
 # The system
 
 
-class LidarSerialSource(LeafSystem):
+class LidarSerialSource(DeviceSource[LaserScan, LidarSerialStatus]):
     """Scans from a 2D lidar on ``port``: ``protocol`` ``"rplidar"`` (Slamtec RPLIDAR A1,
     115200 8N1) or ``"scip"`` (Hokuyo UTM-30LX, SCIP 2.0 over USB; the baud rate is ignored by
     the CDC-ACM driver).
@@ -218,11 +216,10 @@ class LidarSerialSource(LeafSystem):
     nominal one for SCIP.
 
     The scan, the :class:`LidarSerialStatus` counters and the start-sequence position are
-    abstract state; the transport and the parsers' partial buffers are I/O and live on the
-    system object, not in the Context. So contexts of this system are not independent (all
-    share the one port), and the system cannot be cloned or pickled across processes. Call
-    :meth:`close` to release the port (it sends no STOP/QT: the device keeps streaming until
-    the next start sequence).
+    abstract state; the transport and the parsers' partial buffers are I/O on the system object,
+    as for every :class:`~hardware_io.systems.device_source.DeviceSource` (contexts share the
+    one port). Call :meth:`close` to release the port (it sends no STOP/QT: the device keeps
+    streaming until the next start sequence).
     """
 
     def __init__(
@@ -245,7 +242,6 @@ class LidarSerialSource(LeafSystem):
         cluster_count: int = 1,
         restart_timeout: float = 2.0,
     ):
-        super().__init__()
         if protocol not in PROTOCOLS:
             raise ValueError(f"unknown lidar protocol {protocol!r}; expected 'rplidar' or 'scip'")
         self.protocol = protocol
@@ -270,31 +266,24 @@ class LidarSerialSource(LeafSystem):
             self.start_sequence = (
                 scip.encode_command("QT") + b"SCIP2.0\n" + scip.encode_command("BM") + md,
             )
-        self.transport = transport if transport is not None else SerialTransport(port, baudrate)
+        super().__init__(
+            transport if transport is not None else SerialTransport(port, baudrate),
+            "lidar_scan",
+            LaserScan(),
+            LidarSerialStatus(),
+            period,
+        )
+        self._link = self._declare_polled_state(_Link())
         if protocol == "rplidar":
             self._nodes = rp.ScanNodeParser()
             self._assembler = rp.RplidarScanAssembler()
         else:
             self._stream = SalvagingScipStream()
             self._stream.command = self.scan_command
-        self._scan = self.DeclareAbstractState(AbstractValue.Make(LaserScan()))
-        self._status = self.DeclareAbstractState(AbstractValue.Make(LidarSerialStatus()))
-        self._link = self.DeclareAbstractState(AbstractValue.Make(_Link()))
-        self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
-        self.DeclareStateOutputPort("lidar_scan", self._scan)
 
-    def status(self, context) -> LidarSerialStatus:
-        return context.get_abstract_state(self._status).get_value()
-
-    def close(self) -> None:
-        self.transport.close()
-
-    def _update(self, context, state):
-        t = context.get_time()
-        scan = context.get_abstract_state(self._scan).get_value()
-        st = context.get_abstract_state(self._status).get_value()
-        link = context.get_abstract_state(self._link).get_value()
-
+    def poll(
+        self, t: float, scan: LaserScan, st: LidarSerialStatus, link: _Link
+    ) -> tuple[LaserScan, LidarSerialStatus, _Link]:
         written = starts = 0
         if link.next_request >= len(self.start_sequence) and (
             t - link.last_progress >= self.restart_timeout
@@ -328,9 +317,7 @@ class LidarSerialSource(LeafSystem):
             partial_scans=st.partial_scans + counts[3],
             starts=st.starts + starts,
         )
-        state.get_mutable_abstract_state(self._scan).set_value(scan)
-        state.get_mutable_abstract_state(self._status).set_value(st)
-        state.get_mutable_abstract_state(self._link).set_value(link)
+        return scan, st, link
 
     def _parse_rplidar(self, data: bytes, host_time: float, t: float):
         p = self._nodes

@@ -4,10 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import LeafSystem
-
 from hardware_io.codecs.velodyne import SweepAssembler, VelodyneError, decode_packet
+from hardware_io.systems.device_source import DeviceSource
 from hardware_io.transport import UdpTransport
 from usvdrake.sensors.messages import PointCloud
 
@@ -26,7 +24,7 @@ class VelodyneUdpStatus:
     device_time: float = 0.0  #: [s] end of the last sweep on the sensor clock (past the hour)
 
 
-class VelodyneUdpSource(LeafSystem):
+class VelodyneUdpSource(DeviceSource[PointCloud, VelodyneUdpStatus]):
     """Sweeps from a VLP-16 sending data packets to ``address:port`` (default: every interface,
     port 2368 -- the sensor's factory destination port).
 
@@ -50,9 +48,9 @@ class VelodyneUdpSource(LeafSystem):
     clock).
 
     The cloud and the :class:`VelodyneUdpStatus` counters are abstract state; the socket and
-    the assembler's partial sweep are I/O and live on the system object, not in the Context. So
-    contexts of this system are not independent (all share the one socket), and the system
-    cannot be cloned or pickled across processes. Call :meth:`close` to release the socket.
+    the assembler's partial sweep are I/O on the system object, as for every
+    :class:`~hardware_io.systems.device_source.DeviceSource` (contexts share the one socket;
+    call :meth:`close` to release it).
     """
 
     def __init__(
@@ -65,24 +63,18 @@ class VelodyneUdpSource(LeafSystem):
         resolution_deg: float = 0.2,
         cut_azimuth_deg: float = 0.0,
     ):
-        super().__init__()
         self._assembler = SweepAssembler(resolution_deg, cut_azimuth_deg)
-        self.transport = transport if transport is not None else UdpTransport(address, port)
-        self._cloud = self.DeclareAbstractState(AbstractValue.Make(PointCloud()))
-        self._status = self.DeclareAbstractState(AbstractValue.Make(VelodyneUdpStatus()))
-        self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
-        self.DeclareStateOutputPort("lidar_points", self._cloud)
+        super().__init__(
+            transport if transport is not None else UdpTransport(address, port),
+            "lidar_points",
+            PointCloud(),
+            VelodyneUdpStatus(),
+            period,
+        )
 
-    def status(self, context) -> VelodyneUdpStatus:
-        return context.get_abstract_state(self._status).get_value()
-
-    def close(self) -> None:
-        self.transport.close()
-
-    def _update(self, context, state):
-        t = context.get_time()
-        cloud = context.get_abstract_state(self._cloud).get_value()
-        st = context.get_abstract_state(self._status).get_value()
+    def poll(
+        self, t: float, cloud: PointCloud, st: VelodyneUdpStatus
+    ) -> tuple[PointCloud, VelodyneUdpStatus]:
         datagrams, _host_time = self.transport.read()
         asm = self._assembler
         partial0 = asm.partial_sweeps
@@ -109,5 +101,4 @@ class VelodyneUdpSource(LeafSystem):
             partial_sweeps=st.partial_sweeps + asm.partial_sweeps - partial0,
             device_time=device_time,
         )
-        state.get_mutable_abstract_state(self._cloud).set_value(cloud)
-        state.get_mutable_abstract_state(self._status).set_value(st)
+        return cloud, st
