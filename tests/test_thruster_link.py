@@ -466,3 +466,17 @@ def test_watchdog_keeps_azimuth_angles():
     np.testing.assert_array_equal(rig.command(), [0, 2, 0, 4, 0, 6])
     with pytest.raises(ValueError):
         Watchdog(6, {"imu": 0.1}, force_mask=[True] * 4)
+
+
+def test_watchdog_hears_a_lidar_even_when_it_sees_nothing():
+    from usvdrake.sensors.messages import LaserScan
+
+    rig = _WatchdogRig({"lidar_scan": 0.25})
+    t = 0.0
+    while t < 0.5:  # 10 Hz scans, open water: no return at all
+        rig.feed("lidar_scan", LaserScan(time=t, ranges=np.ones(3), valid=np.zeros(3, bool)))
+        t += 0.1
+        rig.advance_to(t)
+        np.testing.assert_array_equal(rig.status(), [0, 0, 0])
+    rig.advance_to(t + 0.3)  # then the scans stop
+    np.testing.assert_array_equal(rig.status(), [1, 1, 1])

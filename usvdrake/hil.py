@@ -187,6 +187,13 @@ def run_hil(
             gps=dataclasses.replace(hw.gps, port=rig.ports["gps"]),
             imu=dataclasses.replace(hw.imu, port=rig.ports["imu"]),
         )
+        if "lidar2d" in rig.ports:  # the rig plays an RPLIDAR A1
+            hw = dataclasses.replace(
+                hw,
+                lidar2d=dataclasses.replace(
+                    hw.lidar2d, port=rig.ports["lidar2d"], protocol="rplidar"
+                ),
+            )
     log_writer = None
     try:
         builder = DiagramBuilder()
@@ -278,7 +285,7 @@ def run_hil(
     times, states = times[keep], None
     if report is not None:
         states = truth_on_host_clock(report, np.asarray(clock.rows, float), times)
-        metrics.update(_truth_metrics(vessel, context, logs, keep, times, states, report))
+        metrics.update(_truth_metrics(scenario, vessel, context, logs, keep, times, states, report))
         if compare_sim:
             from usvdrake.mission import run_mission
 
@@ -300,9 +307,13 @@ def run_hil(
     return HilResult(metrics, times, states, files)
 
 
-def _truth_metrics(vessel, context, logs, keep, times, states, report) -> dict:
-    """Tracking and estimation against the rig's truth, the watchdog and the wires."""
+def _truth_metrics(scenario, vessel, context, logs, keep, times, states, report) -> dict:
+    """Tracking and estimation against the rig's truth, clearance to the world, the watchdog
+    and the wires."""
+    from usvdrake.analysis.metrics import vessel_clearance
     from usvdrake.mission import control_estimation_metrics
+    from usvdrake.vessel import load_vessel
+    from usvdrake.worlds import make_world
 
     def logged(name):
         return logs[name].data().T[keep] if name in logs else None
@@ -317,6 +328,13 @@ def _truth_metrics(vessel, context, logs, keep, times, states, report) -> dict:
         logged("pose_measurement"),
         None if nmhe_ms is None else nmhe_ms.ravel(),
     )
+    clearance = vessel_clearance(
+        make_world(scenario.world, scenario.seed), states, load_vessel(scenario.vessel)
+    )
+    finite = clearance[np.isfinite(clearance)]
+    out["min_clearance_m"] = float(finite.min()) if len(finite) else None
+    out["collision_samples"] = int(np.sum(clearance < 0.0))
+    out["path_length_m"] = float(np.sum(np.hypot(*np.diff(states[:, :2], axis=0).T)))
     cut = report["cut_time"]
     out["watchdog_latency_ms"] = watchdog_latency_ms(report)
     last = report.get("last_command_before_cut")

@@ -10,6 +10,7 @@ source speaks:
 * :class:`GpsEmulator` — an NMEA 0183 receiver sending GGA: the simulated station's ``gps``
   fix when the scenario simulates a GPS, else an RTK-class fix made from the true position with
   the pose sensor's σ (000 eq. 16: RT = 0.0005 m² → σ ≈ 2.2 cm), fix quality 4.
+* :class:`RplidarEmulator` — a Slamtec RPLIDAR A1 sending the simulated 2D scans.
 * :class:`ImuEmulator` — an Xsens MTi sending MTData2 (quaternion, acceleration, rate of
   turn): the simulated ``imu`` when simulated, else an AHRS from the true heading and yaw rate
   with the pose sensor's σψ, σr.
@@ -33,10 +34,10 @@ from hardware_io.firmware import McuFirmware
 from hardware_io.pty_link import PtyDevice
 from usvdrake.sensors.geodesy import LocalFrame
 from usvdrake.sensors.imu_model import yaw_quaternion
-from usvdrake.sensors.messages import GpsFix, ImuSample
+from usvdrake.sensors.messages import GpsFix, ImuSample, LaserScan
 from usvdrake.systems.vessel.thrusters import command_size
 
-__all__ = ["GpsEmulator", "ImuEmulator", "McuEmulator"]
+__all__ = ["GpsEmulator", "ImuEmulator", "McuEmulator", "RplidarEmulator", "TruthRecorder"]
 
 GRAVITY = 9.80665  # [m/s²]
 
@@ -200,3 +201,35 @@ class TruthRecorder(LeafSystem):
     def _record(self, context):
         q = self._state.Eval(context)
         self.rows.append([time.monotonic(), context.get_time(), *map(float, q)])
+
+
+class RplidarEmulator(LeafSystem):
+    """A Slamtec RPLIDAR A1 on ``pty`` (:class:`hardware_io.devices.RplidarDevice`).
+
+    Input ``lidar_scan``: the simulated station's :class:`LaserScan`. Every ``poll_period`` it
+    answers the host's requests (STOP, SCAN, GET_INFO ...); once the host has started a scan,
+    every ``scan_period`` (half a period after each simulated sweep ends, so that sweep is on
+    the port) it sends that revolution as measurement nodes.
+    """
+
+    def __init__(self, pty: PtyDevice, scan_period: float, poll_period: float = 0.01):
+        super().__init__()
+        from hardware_io.devices import RplidarDevice
+
+        self.pty = pty
+        self.device = RplidarDevice()
+        self.revolutions = 0
+        self._scan = self.DeclareAbstractInputPort("lidar_scan", AbstractValue.Make(LaserScan()))
+        self.DeclarePeriodicPublishEvent(poll_period, 0.0, self._answer)
+        self.DeclarePeriodicPublishEvent(scan_period, 1.5 * scan_period, self._send_scan)
+
+    def _answer(self, context):
+        data = self.pty.read()
+        if data:
+            self.pty.write(self.device.feed(data))
+
+    def _send_scan(self, context):
+        scan = self._scan.Eval(context)
+        if self.device.scanning and scan.valid.size:
+            self.pty.write(self.device.scan_bytes(scan))
+            self.revolutions += 1

@@ -2,10 +2,10 @@
 
 ``python -m hardware_io.emulators.rig SCENARIO [--corrupt P] [--report FILE]`` builds the
 scenario's *simulated* station (plant, environment, simulated sensors), puts a thruster
-microcontroller, a GNSS receiver and an IMU on pseudo-terminals in front of it
-(:mod:`hardware_io.emulators.device_systems`) and simulates it in real time. It prints one JSON
-line ``{"ready": true, "ports": {"thrusters": "/dev/pts/N", "gps": ..., "imu": ...}}`` on
-stdout; the host (``usvdrake hil``) opens those ports exactly as it would open the boat's USB
+microcontroller, a GNSS receiver, an IMU and, when the scenario has a 2D lidar, an RPLIDAR A1 on
+pseudo-terminals in front of it (:mod:`hardware_io.emulators.device_systems`) and simulates it in
+real time. It prints one JSON line ``{"ready": true, "ports": {"thrusters": "/dev/pts/N", ...}}``
+on stdout; the host (``usvdrake hil``) opens those ports exactly as it would open the boat's USB
 serial adapters.
 
 The boat is moored (held at the scenario's initial state) until the microcontroller receives
@@ -34,6 +34,7 @@ from hardware_io.emulators.device_systems import (
     GpsEmulator,
     ImuEmulator,
     McuEmulator,
+    RplidarEmulator,
     TruthRecorder,
 )
 from hardware_io.firmware import McuFirmware
@@ -62,11 +63,12 @@ class Rig:
         self.scenario = scenario
         vessel = load_vessel(scenario.vessel)
         world = make_world(scenario.world, scenario.seed)
+        wires = WIRES + (("lidar2d",) if "lidar2d" in scenario.sensors.enabled else ())
         self.faults = {
             name: WireFaults(corruption, seed=scenario.seed * 10 + i)
-            for i, name in enumerate(WIRES)
+            for i, name in enumerate(wires)
         }
-        self.ptys = {name: PtyDevice(self.faults[name]) for name in WIRES}
+        self.ptys = {name: PtyDevice(self.faults[name]) for name in wires}
         azimuth = any(t.azimuth for t in vessel.thrusters)
         self.firmware = McuFirmware(len(vessel.thrusters), azimuth=azimuth)
 
@@ -108,6 +110,15 @@ class Rig:
             builder.Connect(truth, device.GetInputPort("state"))
             if device.HasInputPort(port):
                 builder.Connect(station.GetOutputPort(port), device.GetInputPort(port))
+        if "lidar2d" in self.ptys:
+            from usvdrake.sensors.lidar_model import preset_by_name
+
+            lidar_cfg = scenario.sensors.lidar2d
+            rate = lidar_cfg.rate_hz or preset_by_name(lidar_cfg.preset).rate_hz
+            lidar = builder.AddNamedSystem(
+                "rplidar", RplidarEmulator(self.ptys["lidar2d"], 1.0 / rate)
+            )
+            builder.Connect(station.GetOutputPort("lidar_scan"), lidar.GetInputPort("lidar_scan"))
         self.truth = builder.AddNamedSystem("truth_recorder", TruthRecorder())
         builder.Connect(truth, self.truth.GetInputPort("state"))
         self.diagram = builder.Build()

@@ -110,7 +110,10 @@ class Watchdog(LeafSystem):
             if port.HasValue(context):
                 msg = port.Eval(context)
                 mt = float(getattr(msg, "time", -np.inf))
-                if mt > x[_LAST + i] and bool(getattr(msg, "valid", True)):
+                # GpsFix.valid flags a fix; LaserScan.valid is a per-beam mask, and a scan with
+                # no return (open water) is still the lidar speaking
+                valid = getattr(msg, "valid", True)
+                if mt > x[_LAST + i] and (valid if isinstance(valid, bool) else True):
                     x[_LAST + i] = mt
             if t - x[_LAST + i] > self.timeouts[i]:
                 silent |= 1 << i
