@@ -89,6 +89,18 @@ def _run_serial(source, port_name, pty, device, emit, steps, dt, check=None, dra
     return ctx
 
 
+def _emitter(encode, items, sent):
+    """``emit(k)``: the device's bytes for ``items[k]``, remembering in ``sent`` what went out."""
+
+    def emit(k):
+        data = encode(items[k])
+        if data:
+            sent.append(items[k])
+        return data
+
+    return emit
+
+
 def _rplidar_scan(rng, time_s: float = 0.0) -> LaserScan:
     n = 360
     r = rng.uniform(0.2, 11.5, n)
@@ -243,11 +255,7 @@ def test_imu_source_decodes_samples():
     with PtyDevice() as pty:
         source = ImuSerialSource(pty.path, 115200, period=0.01)
 
-        def emit(k):
-            data = dev.sample_bytes(samples[k])
-            if data:
-                sent.append(samples[k])
-            return data
+        emit = _emitter(dev.sample_bytes, samples, sent)
 
         def check(ctx):
             st = source.status(ctx)
@@ -320,11 +328,7 @@ def test_lidar_source_decodes_scans(protocol):
     with PtyDevice() as pty:
         source = LidarSerialSource(pty.path, 115200, protocol, period=0.01)
 
-        def emit(k):
-            data = dev.scan_bytes(scans[k])
-            if data:
-                sent.append(scans[k])
-            return data
+        emit = _emitter(dev.scan_bytes, scans, sent)
 
         def check(ctx):
             st = source.status(ctx)

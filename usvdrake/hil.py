@@ -80,12 +80,10 @@ class RigProcess:
 
     def _wait_ready(self) -> dict[str, str]:
         deadline = time.monotonic() + READY_TIMEOUT_S
-        buf = b""
         while time.monotonic() < deadline:
             ready, _, _ = select.select([self.proc.stdout], [], [], 0.2)
             if ready:
                 chunk = self.proc.stdout.readline()
-                buf += chunk
                 if chunk.strip():
                     return json.loads(chunk)["ports"]
             if self.proc.poll() is not None:

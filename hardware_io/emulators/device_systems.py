@@ -30,6 +30,7 @@ from pydrake.systems.framework import LeafSystem
 
 from hardware_io.codecs.imu import encode_mtdata2, from_imu_sample
 from hardware_io.codecs.nmea import GGA, encode_gga
+from hardware_io.devices import RplidarDevice
 from hardware_io.firmware import McuFirmware
 from hardware_io.pty_link import PtyDevice
 from usvdrake.sensors.geodesy import LocalFrame
@@ -214,8 +215,6 @@ class RplidarEmulator(LeafSystem):
 
     def __init__(self, pty: PtyDevice, scan_period: float, poll_period: float = 0.01):
         super().__init__()
-        from hardware_io.devices import RplidarDevice
-
         self.pty = pty
         self.device = RplidarDevice()
         self.revolutions = 0

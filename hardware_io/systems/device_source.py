@@ -19,10 +19,11 @@ class DeviceSource(LeafSystem, Generic[MessageT, StatusT]):
 
     The last message (initially ``message``, a default "nothing yet" value) and the status
     counters (initially ``status``, a frozen dataclass) are abstract state. A periodic
-    unrestricted update every ``period`` seconds (first at t = 0) hands both to :meth:`poll`,
-    which talks to the transport, decodes what arrived and returns the new pair; the output port
-    is the message state. A subclass may declare more abstract state with
-    :meth:`_declare_polled_state`: :meth:`poll` then also receives and returns it, after the
+    unrestricted update every ``period`` seconds (first at t = 0) hands both to the subclass's
+    ``poll(t, message, status, *extra) -> (message, status, *extra)``, which talks to the
+    transport at simulation time ``t``, decodes what arrived and returns the updated values; the
+    output port is the message state. A subclass may declare more abstract state with
+    :meth:`_declare_polled_state`: ``poll`` then also receives and returns it, after the
     status, in the order of declaration.
 
     The transport and the protocol parsers' partial buffers are I/O and live on the system
@@ -43,7 +44,7 @@ class DeviceSource(LeafSystem, Generic[MessageT, StatusT]):
         self.DeclareStateOutputPort(port_name, self._message)
 
     def _declare_polled_state(self, value: Any):
-        """Declares an abstract state initialised to ``value`` that :meth:`poll` receives and
+        """Declares an abstract state initialised to ``value`` that ``poll`` receives and
         returns after the status; returns its index."""
         index = self.DeclareAbstractState(AbstractValue.Make(value))
         self._polled.append(index)
@@ -54,11 +55,6 @@ class DeviceSource(LeafSystem, Generic[MessageT, StatusT]):
 
     def close(self) -> None:
         self.transport.close()
-
-    def poll(self, t: float, message: MessageT, status: StatusT, *extra: Any) -> tuple:
-        """One update at simulation time ``t``: read (and write) the transport, decode, and
-        return ``(message, status, *extra)`` updated (the inputs are the current state)."""
-        raise NotImplementedError
 
     def _update(self, context, state):
         values = [context.get_abstract_state(i).get_value() for i in self._polled]

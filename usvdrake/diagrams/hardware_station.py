@@ -176,10 +176,8 @@ def make_hardware_station(
 
 def close_hardware(diagram: Diagram) -> None:
     """Release every port and thread the hardware systems inside ``diagram`` hold."""
-    from pydrake.systems.framework import Diagram as _Diagram
-
     for system in diagram.GetSystems():
-        if isinstance(system, _Diagram):
+        if isinstance(system, Diagram):
             close_hardware(system)
         elif callable(getattr(system, "close", None)):
             system.close()
