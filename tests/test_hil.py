@@ -78,7 +78,12 @@ def test_hil_completes_with_one_percent_of_bytes_corrupted(tmp_path):
     assert m["tracked_until_s"] == pytest.approx(10.0)
     assert m["wire_gps_bytes_corrupted"] > 0 and m["wire_thrusters_bytes_corrupted"] > 0
     assert m["gps_bad_sentences"] > 0 and m["thruster_crc_errors"] > 0  # seen and rejected
-    assert m["gps_fixes"] > 100 and m["mcu_frames_ok"] > 200  # and the rest got through
+    # and the rest got through: a 20 Hz GGA of ~75 bytes survives 1 % byte corruption with
+    # p = 0.99**75 ≈ 0.47, a 50 Hz command frame with p > 0.8; the bounds sit ≥ 5 σ below that
+    gga = m["gps_fixes"] + m["gps_bad_sentences"]
+    frames = m["thruster_frames_sent"]
+    assert gga > 150 and m["gps_fixes"] > 0.3 * gga, (m["gps_fixes"], gga)
+    assert frames > 350 and m["mcu_frames_ok"] > 0.6 * frames, (m["mcu_frames_ok"], frames)
     assert m["nmpc_failures"] == 0
     assert m["position_rmse_m"] < 0.3
     assert m["watchdog_latency_ms"] is not None and m["watchdog_latency_ms"] <= 200.0
