@@ -58,7 +58,12 @@ def cmd_run(args) -> int:
         progress=not args.quiet,
         realtime_rate=rate,
     )
-    print(_summary(result, scenario))
+    if scenario.controller == "taxi":
+        from usvdrake.fleet import fleet_summary
+
+        print(fleet_summary(result.metrics, args.out))
+    else:
+        print(_summary(result, scenario))
     if args.meshcat and sys.stdin.isatty():
         print("Meshcat stays up for the replay; press Ctrl-C to quit.")
         try:

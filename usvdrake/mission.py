@@ -42,6 +42,7 @@ class MissionResult:
     reference: np.ndarray  # (n × 3) [ψ_d, u_d, e]
     thrust: np.ndarray  # (n × command size) applied thrust
     files: dict = field(default_factory=dict)  # name → path of what was written
+    tracks: dict = field(default_factory=dict)  # fleets: boat name → (n × 6) ground truth
 
 
 def _write_tum(path: Path, times: np.ndarray, states: np.ndarray) -> None:
@@ -131,6 +132,68 @@ def control_estimation_metrics(
     return out
 
 
+def simulate_until(
+    diagram,
+    scenario: Scenario,
+    system,
+    done_port: str,
+    reason: str,
+    realtime_rate: float = 0.0,
+    progress: bool = False,
+    step: float | None = None,
+    postfix=None,
+):
+    """Simulate ``diagram`` with the scenario's integrator settings until ``system``'s output
+    ``done_port`` (a subsystem of ``diagram``) reads > 0 or ``scenario.duration`` elapses,
+    advancing ``step`` sim-seconds at a time (default: 1/200 of the run, at least 0.5 s) under
+    a progress bar if asked (``postfix(context)`` adds text to it). Returns (simulator, final
+    time [s], whether it ended done, wall time [s])."""
+    simulator = Simulator(diagram)
+    ResetIntegratorFromFlags(
+        simulator, scenario.simulation.integrator, scenario.simulation.max_step
+    )
+    simulator.get_mutable_integrator().set_target_accuracy(scenario.simulation.accuracy)
+    simulator.set_target_realtime_rate(realtime_rate)
+    context = simulator.get_mutable_context()
+    port = system.GetOutputPort(done_port)
+
+    def monitor(root_context):
+        if port.Eval(system.GetMyContextFromRoot(root_context))[0] > 0:
+            return EventStatus.ReachedTermination(diagram, reason)
+        return EventStatus.Succeeded()
+
+    simulator.set_monitor(monitor)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(
+            total=scenario.duration,
+            unit="sim s",
+            bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]",
+        )
+    step = step or max(0.5, scenario.duration / 200.0)
+    wall0 = time.perf_counter()
+    t, complete = 0.0, False
+    try:
+        simulator.Initialize()
+        while t < scenario.duration - 1e-9:
+            status = simulator.AdvanceTo(min(t + step, scenario.duration))
+            new_t = context.get_time()
+            if bar is not None:
+                if postfix is not None:
+                    bar.set_postfix_str(postfix(context))
+                bar.update(new_t - t)
+            t = new_t
+            if status.reason() == SimulatorStatus.ReturnReason.kReachedTerminationCondition:
+                complete = True
+                break
+    finally:
+        if bar is not None:
+            bar.close()
+    return simulator, t, complete, time.perf_counter() - wall0
+
+
 def run_mission(
     scenario: Scenario,
     out_dir: str | Path | None = None,
@@ -145,7 +208,14 @@ def run_mission(
     localhost Meshcat is made just for the HTML replay. ``out_dir``: write ``metrics.json``,
     ``replay.html``, ``report.html`` and ``ground_truth.tum`` there. ``realtime_rate``: 0 runs as
     fast as possible, 1.0 paces the simulation to the wall clock (for watching live).
+
+    A fleet scenario (controller ``taxi``) runs :func:`usvdrake.fleet.run_fleet_mission`: its
+    result has the service metrics and one track per boat (``tracks``) instead of ``states``.
     """
+    if scenario.controller == "taxi":
+        from usvdrake.fleet import run_fleet_mission
+
+        return run_fleet_mission(scenario, out_dir, meshcat, record, progress, realtime_rate)
     vessel = load_vessel(scenario.vessel)
     world = make_world(scenario.world, scenario.seed)
     if meshcat is None and record and out_dir is not None:
@@ -178,59 +248,26 @@ def run_mission(
     diagram = builder.Build()
     diagram.set_name("mission")
 
-    simulator = Simulator(diagram)
-    ResetIntegratorFromFlags(
-        simulator, scenario.simulation.integrator, scenario.simulation.max_step
-    )
-    simulator.get_mutable_integrator().set_target_accuracy(scenario.simulation.accuracy)
-    simulator.set_target_realtime_rate(realtime_rate)
-    context = simulator.get_mutable_context()
-    complete_port = vessel_diagram.GetOutputPort("mission_complete")
-    vessel_context = vessel_diagram.GetMyContextFromRoot(context)
-
-    def monitor(root_context):
-        if complete_port.Eval(vessel_diagram.GetMyContextFromRoot(root_context))[0] > 0:
-            return EventStatus.ReachedTermination(diagram, "mission complete")
-        return EventStatus.Succeeded()
-
-    simulator.set_monitor(monitor)
     if meshcat is not None and record:
         meshcat.StartRecording(
             frames_per_second=scenario.visualization.rate_hz,
             set_visualizations_while_recording=True,
         )
-
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(
-            total=scenario.duration,
-            unit="sim s",
-            bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]",
-        )
-    wall0 = time.perf_counter()
-    t = 0.0
-    complete = False
     try:
-        simulator.Initialize()
-        step = max(0.5, scenario.duration / 200.0)
-        while t < scenario.duration - 1e-9:
-            target = min(t + step, scenario.duration)
-            status = simulator.AdvanceTo(target)
-            new_t = context.get_time()
-            if bar is not None:
-                bar.update(new_t - t)
-            t = new_t
-            if status.reason() == SimulatorStatus.ReturnReason.kReachedTerminationCondition:
-                complete = True
-                break
+        simulator, t, complete, wall = simulate_until(
+            diagram,
+            scenario,
+            vessel_diagram,
+            "mission_complete",
+            "mission complete",
+            realtime_rate=realtime_rate,
+            progress=progress,
+        )
+        context = simulator.get_context()
+        vessel_context = vessel_diagram.GetMyContextFromRoot(context)
     finally:  # an interrupted or failed run still leaves a finished, readable log
-        if bar is not None:
-            bar.close()
         if log_writer is not None:
             log_writer.close()
-    wall = time.perf_counter() - wall0
 
     if meshcat is not None:
         viz = vessel_diagram.GetSubsystemByName("vessel_visualizer")

@@ -22,6 +22,7 @@ from usvdrake.systems.control.reference_model import ReferenceModelConfig
 from usvdrake.systems.estimation.nmhe_problem import NmheConfig
 from usvdrake.systems.guidance.frontier_explorer import ExplorerConfig
 from usvdrake.systems.guidance.operator import OperatorCommandConfig, parse_mode
+from usvdrake.systems.guidance.taxi_pilot import TaxiConfig
 from usvdrake.systems.slam.graph_slam import GraphSlamConfig
 from usvdrake.systems.slam.hector import HectorConfig
 from usvdrake.typed_yaml import ConfigError, get_dotted, load_typed, resolve_yaml
@@ -30,7 +31,7 @@ from usvdrake.vessel import VESSEL_DIR, available_vessels
 SCENARIO_DIR = Path(__file__).parent / "scenarios"
 DEFAULT_SCENARIO = "canal_demo"
 ESTIMATORS = ("oracle", "nmhe", "observer")
-CONTROLLERS = ("baseline", "nmpc", "explore")
+CONTROLLERS = ("baseline", "nmpc", "explore", "taxi")
 SLAM_METHODS = ("none", "graph", "hector", "known_poses")
 
 
@@ -167,6 +168,35 @@ class ExplorationConfig:
 
 
 @dataclass
+class FleetVesselConfig:
+    """One boat of a fleet (controller ``taxi``)."""
+
+    name: str = ""  # its diagram's name, e.g. roboat_1
+    initial_state: list[float] = field(default_factory=lambda: [0.0] * 6)  # [x y ψ u v r]
+    fail_at: float = -1.0  # [s] the boat reports a fault then (re-assignment); < 0: never
+
+
+@dataclass
+class RequestConfig:
+    """A ride request: a passenger at ``pickup`` asks at ``time`` to go to ``destination``."""
+
+    time: float = 0.0  # [s]
+    pickup: list[float] = field(default_factory=lambda: [0.0, 0.0])  # [m] world x, y
+    destination: list[float] = field(default_factory=lambda: [0.0, 0.0])  # [m] world x, y
+
+
+@dataclass
+class FleetConfig:
+    """Roboat's ride service (000 §III): several boats, one coordinator (controller ``taxi``)."""
+
+    vessels: list[FleetVesselConfig] = field(default_factory=list)
+    requests: list[RequestConfig] = field(default_factory=list)
+    taxi: TaxiConfig = field(default_factory=TaxiConfig)
+    coordinator_period: float = 1.0  # [s] how often requests are assigned
+    assignment_resolution: float = 1.0  # [m] cells of the coordinator's path-cost grid
+
+
+@dataclass
 class SerialDeviceConfig:
     """A device on a serial port (hardware station). An empty ``port`` means not fitted."""
 
@@ -229,6 +259,8 @@ class Scenario:
     visualization: VisualizationConfig = field(default_factory=VisualizationConfig)
     simulation: SimulationConfig = field(default_factory=SimulationConfig)
     hardware: HardwareConfig = field(default_factory=HardwareConfig)
+    # controller "taxi": the boats, ride requests and taxi settings of a fleet mission
+    fleet: FleetConfig = field(default_factory=FleetConfig)
 
 
 # Scenario values that must be > 0, and >= 0 (dotted keys, checked by validate_scenario).
@@ -393,7 +425,11 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
             "'pose' in the list (the NMHE measures it)",
             repr(s.sensors.enabled),
         )
-    if s.controller != "explore" and not s.mission.waypoints:
+    if s.controller == "taxi":
+        _validate_fleet(s, file)
+    elif s.fleet.vessels:
+        raise ConfigError(file, "controller", "'taxi' (the scenario has a fleet)", s.controller)
+    if s.controller not in ("explore", "taxi") and not s.mission.waypoints:
         raise ConfigError(file, "mission.waypoints", "at least one [x, y] waypoint", "none")
     for i, wp in enumerate(s.mission.waypoints):
         if len(wp) != 2:
@@ -478,6 +514,49 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
                 repr(getattr(hw, key).baudrate),
             )
     return s
+
+
+def _validate_fleet(s: Scenario, file) -> None:
+    """A taxi scenario: named boats in free water, requests between free-water points."""
+    from usvdrake.worlds import make_world
+
+    f = s.fleet
+    if not f.vessels:
+        raise ConfigError(file, "fleet.vessels", "at least one vessel", "none")
+    names = [v.name for v in f.vessels]
+    if any(not n for n in names) or len(set(names)) != len(names):
+        raise ConfigError(file, "fleet.vessels", "unique non-empty names", repr(names))
+    if not f.requests:
+        raise ConfigError(file, "fleet.requests", "at least one request", "none")
+    _positive(file, "fleet.coordinator_period", f.coordinator_period)
+    _positive(file, "fleet.assignment_resolution", f.assignment_resolution)
+    for key in ("speed", "acceptance_radius", "period", "resolution", "lookahead"):
+        _positive(file, f"fleet.taxi.{key}", getattr(f.taxi, key))
+    world = make_world(s.world, s.seed)
+    points = []
+    for i, v in enumerate(f.vessels):
+        if len(v.initial_state) != 6:
+            raise ConfigError(
+                file, f"fleet.vessels[{i}].initial_state", "6 numbers", repr(v.initial_state)
+            )
+        points.append((f"fleet.vessels[{i}].initial_state", v.initial_state[:2]))
+    for i, r in enumerate(f.requests):
+        for key in ("pickup", "destination"):
+            if len(getattr(r, key)) != 2:
+                raise ConfigError(
+                    file, f"fleet.requests[{i}].{key}", "[x, y]", repr(getattr(r, key))
+                )
+            points.append((f"fleet.requests[{i}].{key}", getattr(r, key)))
+        if r.time < 0:
+            raise ConfigError(file, f"fleet.requests[{i}].time", "a time >= 0", repr(r.time))
+    for key, (x, y) in points:
+        if not (world.in_water(x, y) and world.clearance(x, y) >= f.taxi.inflation):
+            raise ConfigError(
+                file,
+                key,
+                f"a point in free water of '{s.world}', {f.taxi.inflation} m from obstacles",
+                f"({x}, {y}), clearance {float(world.clearance(x, y)):.2f} m",
+            )
 
 
 def _check_free_water(s: Scenario, file, world) -> None:

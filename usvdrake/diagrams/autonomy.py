@@ -7,6 +7,9 @@ heading/speed law, constrained thrust allocation) or ``nmpc`` (000's NMPC tracki
 reference through the mission's goals, thruster forces straight out).
 """
 
+import functools
+import math
+
 import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import PassThrough
@@ -157,9 +160,68 @@ def _add_exploration(
     builder.ExportOutput(estimate, "state_estimate")
 
 
-def make_autonomy(scenario: Scenario, vessel: VesselParams, world: World, meshcat=None) -> Diagram:
+@functools.lru_cache(maxsize=4)
+def taxi_grid(world_name: str, seed: int, resolution: float, inflation: float):
+    """The taxis' planning grid of a world (built once and shared by the fleet's pilots; a
+    PlanningGrid is immutable)."""
+    from usvdrake.systems.guidance.grid_astar import PlanningGrid
+    from usvdrake.worlds import make_world
+
+    return PlanningGrid.from_world(make_world(world_name, seed), resolution, inflation)
+
+
+def _add_taxi(builder, scenario: Scenario, vessel: VesselParams, estimate, member: str):
+    """A fleet boat (000 §III): ``TaxiPilot`` (rides from the coordinator's ``task``, A*
+    around the boats its lidar sees) feeding the NMPC its reference."""
+    from usvdrake.sensors.lidar_model import preset_by_name
+    from usvdrake.systems.control.nmpc_system import Nmpc
+    from usvdrake.systems.guidance.taxi_pilot import TaxiPilot
+
+    cfg = scenario.fleet.taxi
+    me = next(v for v in scenario.fleet.vessels if v.name == member)
+    enabled = scenario.sensors.enabled
+    kind, lidar, port = None, None, None
+    if "lidar3d" in enabled:
+        kind, lidar, port = "3d", scenario.sensors.lidar3d, "lidar_points"
+    elif "lidar2d" in enabled:
+        kind, lidar, port = "2d", scenario.sensors.lidar2d, "lidar_scan"
+    pilot = builder.AddNamedSystem(
+        "taxi_pilot",
+        TaxiPilot(
+            cfg,
+            taxi_grid(scenario.world, scenario.seed, cfg.resolution, cfg.inflation),
+            me.initial_state,
+            lidar_mount=lidar.mount if lidar else None,
+            lidar_kind=kind,
+            lidar_period=1.0 / (lidar.rate_hz or preset_by_name(lidar.preset).rate_hz)
+            if lidar
+            else 0.1,
+            hull_radius=float(np.hypot(vessel.hull.length, vessel.hull.beam) / 2),
+            fail_at=me.fail_at if me.fail_at >= 0 else math.inf,
+        ),
+    )
+    nmpc = builder.AddNamedSystem("nmpc", Nmpc(vessel, scenario.nmpc, None))
+    builder.Connect(estimate, pilot.GetInputPort("state_estimate"))
+    builder.Connect(estimate, nmpc.GetInputPort("state_estimate"))
+    builder.Connect(
+        pilot.GetOutputPort("reference_trajectory"), nmpc.GetInputPort("reference_trajectory")
+    )
+    builder.ExportInput(pilot.GetInputPort("task"), "task")
+    if port is not None:
+        builder.ExportInput(pilot.GetInputPort(port), port)
+    builder.ExportOutput(nmpc.GetOutputPort("thruster_command"), "thruster_command")
+    builder.ExportOutput(nmpc.GetOutputPort("predicted_trajectory"), "predicted_trajectory")
+    builder.ExportOutput(nmpc.GetOutputPort("nmpc_failures"), "nmpc_failures")
+    builder.ExportOutput(pilot.GetOutputPort("taxi_status"), "taxi_status")
+    builder.ExportOutput(pilot.GetOutputPort("reference"), "reference")
+
+
+def make_autonomy(
+    scenario: Scenario, vessel: VesselParams, world: World, meshcat=None, member: str = ""
+) -> Diagram:
     """The autonomy diagram of ``scenario``. ``meshcat``: where the operator's controls go
-    (exploration only); without it the operator is the scenario's command script."""
+    (exploration only); without it the operator is the scenario's command script. ``member``:
+    which of the fleet's boats this is (controller ``taxi``)."""
     builder = DiagramBuilder()
     if scenario.controller == "explore":
         oracle = _add_oracle(builder) if scenario.slam.method == "known_poses" else None
@@ -183,7 +245,11 @@ def make_autonomy(scenario: Scenario, vessel: VesselParams, world: World, meshca
     else:
         estimate = _add_oracle(builder).get_output_port()
 
-    if scenario.controller == "nmpc":
+    if scenario.controller == "taxi":
+        if not member:
+            raise ValueError("make_autonomy: controller 'taxi' needs the fleet member's name")
+        _add_taxi(builder, scenario, vessel, estimate, member)
+    elif scenario.controller == "nmpc":
         from usvdrake.systems.control.nmpc_system import Nmpc
         from usvdrake.systems.guidance.reference_monitor import ReferenceMonitor
 

@@ -16,6 +16,7 @@ from usvdrake.sensors.imu import Imu
 from usvdrake.sensors.lidar2d import Lidar2D
 from usvdrake.sensors.lidar3d import Lidar3D
 from usvdrake.sensors.pose_sensor import PoseSensor
+from usvdrake.sensors.sampled_lidar import OtherVessels
 from usvdrake.sensors.thrust_sensor import ThrustSensor, thrust_noise_scale
 from usvdrake.systems.vessel.environment import Environment
 from usvdrake.systems.vessel.thrust_mixer import ThrustMixer
@@ -50,9 +51,17 @@ def make_sim_station(scenario: Scenario, vessel: VesselParams, world: World) -> 
     )
     builder.Connect(mixer.GetOutputPort("thrust_applied"), thrust.GetInputPort("thrust_applied"))
     builder.ExportOutput(thrust.GetOutputPort("thrust_measured"), "thrust_measured")
+    others = fleet_others(scenario, vessel)
+    others_exported = False
     for name in sensors.enabled:
-        system, port = _make_sensor(name, scenario, world)
+        system, port = _make_sensor(name, scenario, world, others)
         add_state_sensor(builder, system, state, port)
+        if others is not None and system.HasInputPort("other_vessels"):
+            if others_exported:  # a second lidar sees them too
+                builder.ConnectInput("other_vessels", system.GetInputPort("other_vessels"))
+            else:
+                builder.ExportInput(system.GetInputPort("other_vessels"), "other_vessels")
+                others_exported = True
         if name == "imu":
             builder.Connect(
                 plant.GetOutputPort("acceleration"), system.GetInputPort("acceleration")
@@ -79,13 +88,24 @@ def with_model_error(vessel: VesselParams, factors) -> VesselParams:
     return dataclasses.replace(vessel, hydrodynamics=hydro)
 
 
-def _make_sensor(name: str, scenario: Scenario, world: World):
-    """(system, output port name) of an enabled sensor, named as the station shows it."""
+def fleet_others(scenario: Scenario, vessel: VesselParams) -> OtherVessels | None:
+    """The other boats of a fleet scenario as this boat's lidar sees them (same hull; from
+    its draught below the water to 1.5 m above it: deck, canopy and passengers), or None."""
+    count = len(scenario.fleet.vessels) - 1 if scenario.controller == "taxi" else 0
+    if count <= 0:
+        return None
+    hull = vessel.hull
+    return OtherVessels(count, hull.length, hull.beam, -hull.draught, 1.5)
+
+
+def _make_sensor(name: str, scenario: Scenario, world: World, others=None):
+    """(system, output port name) of an enabled sensor, named as the station shows it;
+    ``others``: the fleet's other boats, seen by the lidars."""
     sensors, seed = scenario.sensors, scenario.seed
     if name == "lidar2d":
-        return Lidar2D(sensors.lidar2d, world.scene, seed), "lidar_scan"
+        return Lidar2D(sensors.lidar2d, world.scene, seed, others=others), "lidar_scan"
     if name == "lidar3d":
-        return Lidar3D(sensors.lidar3d, world.scene, seed), "lidar_points"
+        return Lidar3D(sensors.lidar3d, world.scene, seed, others=others), "lidar_points"
     if name == "imu":
         return Imu(sensors.imu, seed), "imu"
     if name == "pose":

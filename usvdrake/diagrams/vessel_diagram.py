@@ -9,9 +9,20 @@ from usvdrake.scenario import Scenario
 from usvdrake.vessel import load_vessel
 from usvdrake.worlds import make_world
 
+# Inputs a vessel diagram takes from outside the vessel (the fleet): the coordinator's ride
+# (``task``, to the autonomy) and the other boats' states (``other_vessels``, to the lidars).
+FLEET_INPUTS = ("task", "other_vessels")
+FLEET_COLORS = (  # hull colours of a fleet's boats, in order
+    (0.95, 0.55, 0.1),
+    (0.2, 0.6, 0.95),
+    (0.35, 0.8, 0.35),
+    (0.85, 0.3, 0.75),
+    (0.95, 0.85, 0.2),
+)
+
 
 def build_vessel_diagram(
-    scenario: Scenario, meshcat: Meshcat | None = None, hardware=None
+    scenario: Scenario, meshcat: Meshcat | None = None, hardware=None, member: str = ""
 ) -> Diagram:
     """The named vessel diagram of ``scenario``.
 
@@ -25,11 +36,15 @@ def build_vessel_diagram(
     hardware station instead (:mod:`usvdrake.diagrams.hardware_station`: serial/UDP devices
     with the same port names, a watchdog, no ``ground_truth_state``); the autonomy half is the
     same. Meshcat then draws the vessel at its *estimated* state.
+
+    ``member``: the fleet boat this is (controller ``taxi``): the diagram is named after it,
+    also exports the inputs ``task`` and ``other_vessels`` (wired by ``build_fleet_diagram``),
+    and draws under ``/vessels/<member>`` in the boat's colour; the world is drawn by the first.
     """
     vessel = load_vessel(scenario.vessel)  # nominal: the station applies scenario.model_error
     world = make_world(scenario.world, scenario.seed)
     builder = DiagramBuilder()
-    autonomy_system = make_autonomy(scenario, vessel, world, meshcat=meshcat)
+    autonomy_system = make_autonomy(scenario, vessel, world, meshcat=meshcat, member=member)
     needs = [
         autonomy_system.get_input_port(i).get_name()
         for i in range(autonomy_system.num_input_ports())
@@ -47,8 +62,15 @@ def build_vessel_diagram(
         autonomy.GetOutputPort("thruster_command"), station.GetInputPort("thruster_command")
     )
     # The autonomy's inputs are station outputs of the same name (ports are the contract).
+    for i in range(station.num_input_ports()):
+        name = station.get_input_port(i).get_name()
+        if name in FLEET_INPUTS:
+            builder.ExportInput(station.get_input_port(i), name)
     for i in range(autonomy.num_input_ports()):
         name = autonomy.get_input_port(i).get_name()
+        if name in FLEET_INPUTS:
+            builder.ExportInput(autonomy.get_input_port(i), name)
+            continue
         if not station.HasOutputPort(name):
             raise ValueError(
                 f"the autonomy needs station output {name!r}; enable its sensor in the scenario"
@@ -74,16 +96,20 @@ def build_vessel_diagram(
         from usvdrake.viz.vessel_visualizer import VesselVisualizer
 
         viz_cfg = scenario.visualization
-        draw_world(meshcat, world, show_gps_denied=viz_cfg.gps_denied)
-        if viz_cfg.occupancy_resolution > 0:
-            draw_occupancy(meshcat, world.occupancy(viz_cfg.occupancy_resolution))
+        index = [v.name for v in scenario.fleet.vessels].index(member) if member else 0
+        if index == 0:
+            draw_world(meshcat, world, show_gps_denied=viz_cfg.gps_denied)
+            if viz_cfg.occupancy_resolution > 0:
+                draw_occupancy(meshcat, world.occupancy(viz_cfg.occupancy_resolution))
         if autonomy.HasOutputPort("predicted_trajectory"):
             from usvdrake.viz.trajectory_visualizer import TrajectoryVisualizer, draw_reference
 
             nmpc = autonomy.GetSubsystemByName("nmpc")
-            draw_reference(meshcat, nmpc.reference)
+            if nmpc.reference is not None:
+                draw_reference(meshcat, nmpc.reference)
+            path = f"/{member}/nmpc/prediction" if member else "/nmpc/prediction"
             pred = builder.AddNamedSystem(
-                "prediction_visualizer", TrajectoryVisualizer(meshcat, "/nmpc/prediction")
+                "prediction_visualizer", TrajectoryVisualizer(meshcat, path)
             )
             builder.Connect(
                 autonomy.GetOutputPort("predicted_trajectory"), pred.GetInputPort("trajectory")
@@ -112,11 +138,19 @@ def build_vessel_diagram(
                     )
                     builder.Connect(drawn_state, hits.GetInputPort("state"))
                     builder.Connect(station.GetOutputPort(port), hits.GetInputPort("lidar"))
-        x0, y0 = scenario.initial_state[:2]
-        look_at(meshcat, [x0, y0, 0.0], distance=max(20.0 * vessel.hull.length, 8.0))
+        if index == 0:
+            x0, y0 = scenario.initial_state[:2]
+            look_at(meshcat, [x0, y0, 0.0], distance=max(20.0 * vessel.hull.length, 8.0))
         viz = builder.AddNamedSystem(
             "vessel_visualizer",
-            VesselVisualizer(meshcat, vessel, scenario.visualization, scenario.mission.waypoints),
+            VesselVisualizer(
+                meshcat,
+                vessel,
+                scenario.visualization,
+                scenario.mission.waypoints,
+                prefix=f"/vessels/{member}" if member else None,
+                color=FLEET_COLORS[index % len(FLEET_COLORS)] if member else None,
+            ),
         )
         builder.Connect(drawn_state, viz.GetInputPort("state"))
         builder.Connect(
@@ -124,5 +158,5 @@ def build_vessel_diagram(
         )
 
     diagram = builder.Build()
-    diagram.set_name(f"{scenario.vessel}_vessel")
+    diagram.set_name(member or f"{scenario.vessel}_vessel")
     return diagram

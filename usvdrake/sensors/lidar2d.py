@@ -5,7 +5,7 @@ import numpy as np
 from usvdrake.sensors.lidar_model import LidarConfig, Sweep
 from usvdrake.sensors.messages import LaserScan
 from usvdrake.sensors.raycast import Scene
-from usvdrake.sensors.sampled_lidar import SampledLidar
+from usvdrake.sensors.sampled_lidar import OtherVessels, SampledLidar
 
 STREAM_LIDAR2D = 20
 
@@ -26,7 +26,14 @@ class Lidar2D(SampledLidar):
     from where the sensor was then. No-return beams are flagged invalid with range inf.
     """
 
-    def __init__(self, cfg: LidarConfig, scene: Scene, seed: int, stream: int = STREAM_LIDAR2D):
+    def __init__(
+        self,
+        cfg: LidarConfig,
+        scene: Scene,
+        seed: int,
+        stream: int = STREAM_LIDAR2D,
+        others: OtherVessels | None = None,
+    ):
         super().__init__(
             cfg,
             scene,
@@ -36,6 +43,7 @@ class Lidar2D(SampledLidar):
             port_name="lidar_scan",
             empty_message=type(self).empty_message,
             make_message=type(self).make_message,
+            others=others,
         )
 
     def empty_message(self) -> LaserScan:

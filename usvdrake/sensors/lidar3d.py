@@ -5,7 +5,7 @@ import numpy as np
 from usvdrake.sensors.lidar_model import LidarConfig, Sweep
 from usvdrake.sensors.messages import PointCloud
 from usvdrake.sensors.raycast import Scene
-from usvdrake.sensors.sampled_lidar import SampledLidar
+from usvdrake.sensors.sampled_lidar import OtherVessels, SampledLidar
 
 STREAM_LIDAR3D = 30
 
@@ -35,7 +35,14 @@ class Lidar3D(SampledLidar):
         - lidar_points
     """
 
-    def __init__(self, cfg: LidarConfig, scene: Scene, seed: int, stream: int = STREAM_LIDAR3D):
+    def __init__(
+        self,
+        cfg: LidarConfig,
+        scene: Scene,
+        seed: int,
+        stream: int = STREAM_LIDAR3D,
+        others: OtherVessels | None = None,
+    ):
         super().__init__(
             cfg,
             scene,
@@ -45,6 +52,7 @@ class Lidar3D(SampledLidar):
             port_name="lidar_points",
             empty_message=type(self).empty_message,
             make_message=type(self).make_message,
+            others=others,
         )
 
     def empty_message(self) -> PointCloud:

@@ -142,36 +142,24 @@ class LidarModel:
         c, s = np.cos(psi), np.sin(psi)
         return pos + np.column_stack([c * mx - s * my, s * mx + c * my]), mz, psi + myaw
 
-    def sweep(self, q: np.ndarray, k: int) -> Sweep:
-        """The k-th sweep, ending now at state q."""
+    def sweep(self, q: np.ndarray, k: int, movers: Scene | None = None) -> Sweep:
+        """The k-th sweep, ending now at state q. ``movers``: solids that move (other vessels),
+        cast as well and the nearer return kept; they hold still during the sweep."""
         if self.cfg.motion:
             dt = self.column_time - self.sweep_time
             pos, z, heading = self.sensor_poses(q, dt)
             ref = len(dt) // 2
-            ranges = cast(
-                self.scene,
-                self.layout,
-                self.tan_e,
+            ranges = self._cast_all(
+                movers,
                 pos[ref],
                 z,
                 float(heading[ref]),
-                self.range_max,
-                self.preset.range_min,
                 column_origin_xy=pos,
                 column_heading=heading,
             )
         else:
             pos, z, heading = self.sensor_poses(q, np.zeros(1))
-            ranges = cast(
-                self.scene,
-                self.layout,
-                self.tan_e,
-                pos[0],
-                z,
-                float(heading[0]),
-                self.range_max,
-                self.preset.range_min,
-            )
+            ranges = self._cast_all(movers, pos[0], z, float(heading[0]))
         if self.cfg.noise or self.cfg.dropout > 0:
             rng = generator(self.seed, self.stream, k)
             if self.cfg.noise:
@@ -183,3 +171,27 @@ class LidarModel:
             if self.cfg.dropout > 0:
                 ranges = np.where(rng.random(ranges.shape) < self.cfg.dropout, np.inf, ranges)
         return Sweep(ranges, self.column_time, self.sweep_time)
+
+    def _cast_all(self, movers: Scene | None, origin_xy, z, heading, **motion) -> np.ndarray:
+        """Noise-free ranges against the world's scene and, if given, the moving solids."""
+        args = (self.layout, self.tan_e, origin_xy, z, heading, self.range_max)
+        ranges = cast(self.scene, *args, self.preset.range_min, **motion)
+        if movers is not None and len(movers):
+            ranges = np.minimum(ranges, cast(movers, *args, self.preset.range_min, **motion))
+        return ranges
+
+
+def sensor_to_world(points: np.ndarray, mount, pose) -> np.ndarray:
+    """Lidar points (n × 2 or n × 3, sensor frame) in the world frame for a vessel at ``pose``
+    = [x y ψ] with the lidar at ``mount`` = [x y z yaw] on the body [m, rad]; z gets the mount
+    height (a 2D scan lies in the sensor's plane)."""
+    pts = np.asarray(points, float)
+    x, y, psi = (float(v) for v in pose[:3])
+    mx, my, mz, myaw = mount
+    c, s = np.cos(psi), np.sin(psi)
+    ox, oy = x + c * mx - s * my, y + s * mx + c * my
+    ca, sa = np.cos(psi + myaw), np.sin(psi + myaw)
+    z = mz + (pts[:, 2] if pts.shape[1] > 2 else np.zeros(len(pts)))
+    return np.column_stack(
+        [ox + ca * pts[:, 0] - sa * pts[:, 1], oy + sa * pts[:, 0] + ca * pts[:, 1], z]
+    )

@@ -1,12 +1,37 @@
 """``SampledLidar``: what Lidar2D and Lidar3D share — one sweep per period, held in the Context."""
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
+import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
 from usvdrake.sensors.lidar_model import LidarConfig, LidarModel, Sweep, preset_by_name
 from usvdrake.sensors.raycast import Scene
+from usvdrake.worlds.solids import box
+
+
+@dataclass(frozen=True)
+class OtherVessels:
+    """Vessels that share the water with this lidar's own (a fleet): ``count`` hulls of
+    ``length`` × ``beam`` [m] from ``z_min`` to ``z_max`` [m above water], read each sweep from
+    the input ``other_vessels`` (their states [x y ψ u v r] stacked, 6·count)."""
+
+    count: int
+    length: float  # [m]
+    beam: float  # [m]
+    z_min: float  # [m] below the waterline: negative
+    z_max: float  # [m] deck or canopy top
+
+    def scene(self, states: np.ndarray) -> Scene:
+        """The hulls at ``states`` (6·count) as boxes."""
+        q = np.asarray(states, float).reshape(self.count, 6)
+        hulls = [
+            box("vessel", x, y, self.length, self.beam, psi, self.z_min, self.z_max)
+            for x, y, psi in q[:, :3]
+        ]
+        return Scene.from_solids(hulls)
 
 
 class SampledLidar(LeafSystem):
@@ -14,7 +39,8 @@ class SampledLidar(LeafSystem):
     unrestricted update casts the sweep that ends then and stores the message built by
     ``make_message`` in abstract state, with the sweep counter (the noise step) in discrete
     state; the output port ``port_name`` reads the stored message. ``empty_message(lidar)`` and
-    ``make_message(lidar, sweep, time)`` build the subclass's message type."""
+    ``make_message(lidar, sweep, time)`` build the subclass's message type. With ``others``
+    (a fleet) it also has the input ``other_vessels`` and sees their hulls."""
 
     def __init__(
         self,
@@ -26,6 +52,7 @@ class SampledLidar(LeafSystem):
         port_name: str,
         empty_message: Callable[["SampledLidar"], object],
         make_message: Callable[["SampledLidar", Sweep, float], object],
+        others: OtherVessels | None = None,
     ):
         super().__init__()
         self._empty, self._make = empty_message, make_message
@@ -35,6 +62,9 @@ class SampledLidar(LeafSystem):
             raise ValueError(f"{type(self).__name__}: preset {cfg.preset!r} is for {wanted}")
         self._model = LidarModel(preset, cfg, scene, seed, stream)
         self._state = self.DeclareVectorInputPort("state", 6)
+        self._others, self._others_port = others, None
+        if others is not None and others.count > 0:
+            self._others_port = self.DeclareVectorInputPort("other_vessels", 6 * others.count)
         self._msg = self.DeclareAbstractState(AbstractValue.Make(self._empty(self)))
         self._seq = self.DeclareDiscreteState(1)
         period = 1.0 / self._model.rate
@@ -51,7 +81,10 @@ class SampledLidar(LeafSystem):
 
     def _update(self, context, state):
         k = int(context.get_discrete_state(self._seq).GetAtIndex(0))
-        sweep = self._model.sweep(self._state.Eval(context), k)
+        movers = None
+        if self._others_port is not None:
+            movers = self._others.scene(self._others_port.Eval(context))
+        sweep = self._model.sweep(self._state.Eval(context), k, movers)
         state.get_mutable_abstract_state(self._msg).set_value(
             self.make_message(sweep, context.get_time())
         )

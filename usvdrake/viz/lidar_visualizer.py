@@ -6,6 +6,7 @@ from pydrake.geometry import Meshcat, Rgba
 from pydrake.perception import BaseField, Fields, PointCloud
 from pydrake.systems.framework import LeafSystem
 
+from usvdrake.sensors.lidar_model import sensor_to_world
 from usvdrake.sensors.messages import LaserScan
 from usvdrake.sensors.messages import PointCloud as LidarCloud
 
@@ -50,17 +51,5 @@ class LidarVisualizer(LeafSystem):
             pts = np.column_stack([xy, np.zeros(len(xy))])
         if len(pts) == 0:
             return
-        x, y, psi = self._state.Eval(context)[:3]
-        mx, my, mz, myaw = self._mount
-        c, s = np.cos(psi), np.sin(psi)
-        ox, oy = x + c * mx - s * my, y + s * mx + c * my
-        a = psi + myaw
-        ca, sa = np.cos(a), np.sin(a)
-        world = np.column_stack(
-            [
-                ox + ca * pts[:, 0] - sa * pts[:, 1],
-                oy + sa * pts[:, 0] + ca * pts[:, 1],
-                mz + pts[:, 2],
-            ]
-        )
+        world = sensor_to_world(pts, self._mount, self._state.Eval(context))
         self._meshcat.SetObject(self._path, to_drake_cloud(world), point_size=0.08, rgba=HIT_COLOR)

@@ -40,11 +40,13 @@ class VesselVisualizer(LeafSystem):
         cfg: VisualizationConfig,
         waypoints=(),
         prefix: str | None = None,
+        color=None,
     ):
         super().__init__()
         self._meshcat, self._vessel, self._cfg = meshcat, vessel, cfg
         self._waypoints = np.asarray(waypoints, float).reshape(-1, 2)
         self._prefix = prefix or f"/vessels/{vessel.name}"
+        self._hull_color = HULL_COLOR if color is None else Rgba(*color, 1.0)  # (r, g, b) in [0, 1]
         self._period = 1.0 / cfg.rate_hz
         self._chunk = max(1, int(round(cfg.trail_chunk * cfg.rate_hz)))
         self._arrow_length = cfg.arrow_length or vessel.hull.length / 2
@@ -70,10 +72,10 @@ class VesselVisualizer(LeafSystem):
         m.Delete(p)
         freeboard = hull.height - hull.draught
         if hull.shape == "round":
-            m.SetObject(f"{p}/hull/body", Cylinder(hull.length / 2, hull.height), HULL_COLOR)
+            m.SetObject(f"{p}/hull/body", Cylinder(hull.length / 2, hull.height), self._hull_color)
         else:
             m.SetObject(
-                f"{p}/hull/body", MeshcatBox(hull.length, hull.beam, hull.height), HULL_COLOR
+                f"{p}/hull/body", MeshcatBox(hull.length, hull.beam, hull.height), self._hull_color
             )
         m.SetTransform(f"{p}/hull/body", RigidTransform([0, 0, hull.height / 2 - hull.draught]))
         # A red mark on the fore deck shows where "forward" is.

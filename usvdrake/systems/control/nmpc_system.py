@@ -34,6 +34,7 @@ class Nmpc(LeafSystem):
         input_ports:
         - state_estimate
         - disturbance_estimate (optional)
+        - reference_trajectory (only when built with reference=None)
         output_ports:
         - thruster_command
         - predicted_trajectory
@@ -58,6 +59,13 @@ class Nmpc(LeafSystem):
         self._est = self.DeclareVectorInputPort("state_estimate", 6)
         # optional: an estimator's body-frame force estimate (e.g. the NMHE's); replaces d̂
         self._dist = self.DeclareVectorInputPort("disturbance_estimate", 3)
+        self._ref_port = None
+        if reference is None:
+            from usvdrake.systems.guidance.reference_trajectory import HoldPose
+
+            self._ref_port = self.DeclareAbstractInputPort(
+                "reference_trajectory", AbstractValue.Make(HoldPose([0.0, 0.0], 0.0))
+            )
         self._u = self.DeclareDiscreteState(BasicVector(np.zeros(n_u)))
         self._mem = self.DeclareAbstractState(AbstractValue.Make(NmpcMemory()))
         self.DeclareInitializationUnrestrictedUpdateEvent(self._reset)
@@ -82,6 +90,7 @@ class Nmpc(LeafSystem):
 
     @property
     def reference(self):
+        """The fixed reference, or None when it comes in on ``reference_trajectory``."""
         return self._reference
 
     def memory(self, context) -> NmpcMemory:
@@ -111,7 +120,8 @@ class Nmpc(LeafSystem):
             if not np.isfinite(mem.disturbance).all():
                 mem.disturbance = np.zeros(3)
         times = context.get_time() + p.dt * np.arange(p.N + 1)
-        q_ref, nu_dot_ref = self._reference.sample(times)
+        reference = self._reference if self._ref_port is None else self._ref_port.Eval(context)
+        q_ref, nu_dot_ref = reference.sample(times)
         u_ref = p.feedforward(q_ref, nu_dot_ref, mem.disturbance)
         try:
             sol = p.solve(q_hat, q_ref, u_ref, mem.warm, mem.disturbance)

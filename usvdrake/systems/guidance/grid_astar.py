@@ -230,7 +230,7 @@ class PlanningGrid:
         s = np.linspace(0.0, 1.0, n)[:, None]
         return bool(np.all(self.clearance_at((1 - s) * a + s * b) >= need - 1e-9))
 
-    def _snap(self, xy: np.ndarray, what: str, max_snap: float) -> tuple[tuple[int, int], bool]:
+    def snap(self, xy: np.ndarray, what: str, max_snap: float) -> tuple[tuple[int, int], bool]:
         """The cell to plan from for a world point: its own if unblocked, else the nearest
         unblocked cell within ``max_snap`` [m] reachable in a straight line through free water
         (a vessel moored at a quay starts inside the inflation). Returns (cell, snapped)."""
@@ -271,8 +271,8 @@ class PlanningGrid:
         """
         start = np.asarray(start_xy, float)
         goal = np.asarray(goal_xy, float)
-        s_cell, s_snapped = self._snap(start, "start", max_snap)
-        g_cell, g_snapped = self._snap(goal, "goal", max_snap)
+        s_cell, s_snapped = self.snap(start, "start", max_snap)
+        g_cell, g_snapped = self.snap(goal, "goal", max_snap)
         cells = grid_astar(self.blocked, s_cell, g_cell)
         if cells is None:
             raise NoPathError(

@@ -431,3 +431,21 @@ class ReferenceTrajectory:
             nu_dot[mask, 0] = u_dot
             nu_dot[mask, 2] = r_dot
         return q, nu_dot
+
+
+class HoldPose:
+    """A reference that keeps one pose at rest: q_ref = [x y ψ 0 0 0] at every time (station
+    keeping while a taxi waits, boards passengers or yields). Same ``sample`` as
+    :class:`ReferenceTrajectory`; ``xy`` [m], ``psi`` [rad]."""
+
+    def __init__(self, xy, psi: float):
+        self.xy = np.asarray(xy, float).reshape(2)
+        self.psi = float(psi)
+        self.t_end = -math.inf  # already "arrived"
+
+    def sample(self, times) -> tuple[np.ndarray, np.ndarray]:
+        t = np.atleast_1d(np.asarray(times, float)).ravel()
+        q = np.zeros((len(t), 6))
+        q[:, 0:2] = self.xy
+        q[:, 2] = self.psi
+        return q, np.zeros((len(t), 3))
