@@ -110,7 +110,7 @@ def control_estimation_metrics(
     if autonomy.HasSubsystemNamed("nmpc"):
         nmpc = autonomy.GetSubsystemByName("nmpc")
         memory = nmpc.memory(nmpc.GetMyContextFromRoot(context))
-        solve_ms = np.asarray(memory.solve_ms) if memory.solve_ms else np.zeros(1)
+        solve_ms = memory.solve_ms if len(memory.solve_ms) else np.zeros(1)
         out.update(tracking_metrics(times, states, nmpc.reference))
         out.update(
             nmpc_failures=int(memory.failures),
@@ -170,7 +170,7 @@ def simulate_until(
         bar = tqdm(
             total=scenario.duration,
             unit="sim s",
-            bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]",
+            bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}{postfix}]",
         )
     step = step or max(0.5, scenario.duration / 200.0)
     wall0 = time.perf_counter()

@@ -108,16 +108,15 @@ class World:
         tree, radius = self._centres
         pts = np.column_stack([px.ravel(), py.ravel()])
         flat = out.ravel()
-        near = tree.query_ball_point(pts, r=float(radius.max()) + cutoff)
-        candidates = (
-            np.unique(np.concatenate([np.asarray(n, int) for n in near])) if len(near) else []
-        )
-        allowed = set(self.obstacles(height))
-        for i in candidates:
-            if int(i) in allowed:
-                flat[:] = np.minimum(
-                    flat, self.solids[int(i)].signed_distance(pts[:, 0], pts[:, 1])
-                )
+        # Each solid against only the points within its bounding radius + cutoff (farther ones
+        # are > cutoff from it): a long track no longer meets every solid near any of its points.
+        points = cKDTree(pts)
+        near = points.query_ball_point(tree.data, r=radius + cutoff)
+        for i in self.obstacles(height):
+            idx = np.asarray(near[int(i)], int)
+            if len(idx):
+                d = self.solids[int(i)].signed_distance(pts[idx, 0], pts[idx, 1])
+                flat[idx] = np.minimum(flat[idx], d)
         flat[flat > cutoff] = np.inf
         return flat.reshape(px.shape)
 
