@@ -289,3 +289,44 @@ def test_canal_taxi_serves_every_request_apart_and_clear_with_optimal_assignment
         brute = {n: brute_force_cost(grid, xy, ride["pickup"]) for n, xy in free.items()}
         assert ride["vessel"] == min(brute, key=brute.get), ride
         assert ride["path_costs_m"][ride["vessel"]] == pytest.approx(min(brute.values()))
+
+
+def test_taxi_pilot_goes_to_the_pickup_boards_then_delivers_and_reports_each_step():
+    from usvdrake.systems.guidance.taxi_pilot import (
+        ALIGHTING,
+        BOARDING,
+        TO_DESTINATION,
+        TO_PICKUP,
+        TaxiConfig,
+        TaxiPilot,
+    )
+
+    grid = straight_canal_grid()
+    cfg = TaxiConfig(dwell=5.0)
+    pilot = TaxiPilot(cfg, grid, [-40.0, 0.0, 0.0])
+    context = pilot.CreateDefaultContext()
+    pickup, destination = np.array([-10.0, 2.0]), np.array([30.0, -2.0])
+    pilot.GetInputPort("task").FixValue(context, [3, *pickup, *destination])
+    est = pilot.GetInputPort("state_estimate")
+    est.FixValue(context, [-40.0, 0.0, 0.0, 0, 0, 0])
+    simulator = Simulator(pilot, context)
+    simulator.AdvanceTo(0.6)
+    mem = pilot.memory(context)
+    assert mem.phase == TO_PICKUP and mem.ride == 3
+    q_end, _ = mem.reference.sample(mem.reference.t_end)
+    np.testing.assert_allclose(q_end[0, :2], pickup, atol=1e-9)
+    # the boat is where the reference says (a perfect tracker) until it has arrived
+    est.FixValue(context, [*pickup, q_end[0, 2], 0, 0, 0])
+    simulator.AdvanceTo(mem.reference.t_end + 1.0)
+    status = pilot.GetOutputPort("taxi_status").Eval(context)
+    assert pilot.memory(context).phase == BOARDING and status[2] == 3  # picked up ride 3
+    simulator.AdvanceTo(context.get_time() + cfg.dwell + 1.0)
+    mem = pilot.memory(context)
+    assert mem.phase == TO_DESTINATION
+    est.FixValue(context, [*destination, 0.0, 0, 0, 0])
+    simulator.AdvanceTo(mem.reference.t_end + 1.0)
+    status = pilot.GetOutputPort("taxi_status").Eval(context)
+    assert pilot.memory(context).phase == ALIGHTING and status[3] == 3  # delivered ride 3
+    simulator.AdvanceTo(context.get_time() + cfg.dwell + 1.0)
+    status = pilot.GetOutputPort("taxi_status").Eval(context)
+    assert status[0] == IDLE and status[4] == 0 and status[6] == 0  # no fault, never held

@@ -214,7 +214,7 @@ class TaxiPilot(LeafSystem):
                 self._hold(mem, q)
         elif mem.phase == ALIGHTING and t - mem.since >= cfg.dwell:
             mem.phase, mem.since = IDLE, t
-            self._hold(mem, q)
+            mem.reference = HoldPose(q[:2], float(q[2]))  # wait here for the next ride
         state.get_mutable_abstract_state(self._mem).set_value(mem)
 
     def _drive(self, mem: PilotMemory, q, t: float) -> None:
