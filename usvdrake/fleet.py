@@ -242,5 +242,7 @@ def fleet_summary(metrics: dict, out_dir=None) -> str:
             f"{b['holds']} holds, min clearance {b['min_clearance_m']:.2f} m"
         )
     if out_dir is not None:
-        lines.append(f"written to {out_dir}: metrics.json, rides.json, fleet.png, replay.html")
+        files = ("metrics.json", "rides.json", "fleet.png", "replay.html")
+        written = [f for f in files if (Path(out_dir) / f).is_file()]
+        lines.append(f"written to {out_dir}: {', '.join(written)}")
     return "\n".join(lines)
