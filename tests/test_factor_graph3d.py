@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from usvdrake.sensors.geodesy import LocalFrame
-from usvdrake.sensors.lidar3d import sweep_to_cloud
-from usvdrake.sensors.messages import GpsFix, PointCloud
+from usvdrake.sensors.lidar3d import range_image_to_cloud
+from usvdrake.sensors.messages import GpsFix
 from usvdrake.systems.slam.factor_graph3d import (
     FactorGraph3D,
     FactorGraph3DConfig,
@@ -73,16 +73,7 @@ def cast(T, boxes, rng, sigma=0.01):
             best = np.where(hit & (tn < best), tn, best)
     best[best > 100.0] = np.inf
     best = best + rng.normal(0.0, sigma, best.shape)
-    pts, ring, col, t = sweep_to_cloud(best, AZIMUTHS, ELEVATIONS, np.zeros(len(AZIMUTHS)))
-    return PointCloud(
-        elevations=ELEVATIONS,
-        azimuths=AZIMUTHS,
-        range_image=best,
-        points=pts,
-        ring=ring,
-        column=col,
-        point_time=t,
-    )
+    return range_image_to_cloud(best, AZIMUTHS, ELEVATIONS)
 
 
 def canal_path(step=2.0, r=4.0):

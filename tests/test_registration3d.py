@@ -5,7 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from usvdrake.sensors.lidar3d import sweep_to_cloud
+from usvdrake.sensors.lidar3d import range_image_to_cloud
 from usvdrake.sensors.messages import PointCloud
 from usvdrake.systems.slam.lidar_features import (
     FeatureParams,
@@ -55,10 +55,7 @@ def one_ring(ranges):
     r = np.asarray(ranges, float)[None, :]
     n = r.shape[1]
     az = np.deg2rad(np.arange(n) - n // 2)
-    pts, ring, col, t = sweep_to_cloud(r, az, np.zeros(1), np.zeros(n))
-    return PointCloud(
-        elevations=np.zeros(1), azimuths=az, range_image=r, points=pts, ring=ring, column=col
-    )
+    return range_image_to_cloud(r, az, np.zeros(1))
 
 
 # --- roughness: LOAM eq. (1) in range form, against closed forms ------------------------------
@@ -151,16 +148,7 @@ def cast_scene(T_world_sensor, planes, boxes):
 def synthetic_cloud(T, planes, boxes):
     rng_img = cast_scene(T, planes, boxes)
     rng_img[rng_img > 100.0] = np.inf
-    pts, ring, col, t = sweep_to_cloud(rng_img, VLP16_AZIMUTHS, VLP16_ELEVATIONS, np.zeros(1800))
-    return PointCloud(
-        elevations=VLP16_ELEVATIONS,
-        azimuths=VLP16_AZIMUTHS,
-        range_image=rng_img,
-        points=pts,
-        ring=ring,
-        column=col,
-        point_time=t,
-    )
+    return range_image_to_cloud(rng_img, VLP16_AZIMUTHS, VLP16_ELEVATIONS)
 
 
 ROOM = [

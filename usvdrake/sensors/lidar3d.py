@@ -21,6 +21,35 @@ def sweep_to_cloud(
     return pts, ring, col, column_time[col]
 
 
+def range_image_to_cloud(
+    ranges: np.ndarray,
+    azimuths: np.ndarray,
+    elevations: np.ndarray,
+    column_time: np.ndarray | None = None,
+    time: float = 0.0,
+    sweep_time: float = 0.0,
+    motion_applied: bool = False,
+) -> PointCloud:
+    """A ``PointCloud`` message from a range image (rings × columns [m], inf = no return) with
+    its beams' ``azimuths`` and ``elevations`` [rad]; ``column_time`` [s] per column (zeros if
+    None)."""
+    if column_time is None:
+        column_time = np.zeros(len(azimuths))
+    pts, ring, col, t = sweep_to_cloud(ranges, azimuths, elevations, column_time)
+    return PointCloud(
+        time=time,
+        elevations=np.asarray(elevations, float),
+        azimuths=np.asarray(azimuths, float),
+        range_image=ranges,
+        points=pts,
+        ring=ring,
+        column=col,
+        point_time=t,
+        sweep_time=sweep_time,
+        motion_applied=motion_applied,
+    )
+
+
 class Lidar3D(SampledLidar):
     """Casts one full sweep every 1/rate s and holds it as a ``PointCloud``: the organised
     range image (ring × column) and the valid points in the sensor frame of their firing time,
@@ -67,10 +96,13 @@ class Lidar3D(SampledLidar):
         )
 
     def make_message(self, sweep: Sweep, time: float) -> PointCloud:
-        cloud = self.empty_message()
-        pts, ring, col, t = sweep_to_cloud(
-            sweep.ranges, cloud.azimuths, cloud.elevations, sweep.column_time
+        empty = self.empty_message()
+        return range_image_to_cloud(
+            sweep.ranges,
+            empty.azimuths,
+            empty.elevations,
+            sweep.column_time,
+            time,
+            empty.sweep_time,
+            empty.motion_applied,
         )
-        cloud.time, cloud.range_image = time, sweep.ranges
-        cloud.points, cloud.ring, cloud.column, cloud.point_time = pts, ring, col, t
-        return cloud
