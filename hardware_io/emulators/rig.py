@@ -111,10 +111,10 @@ class Rig:
             if device.HasInputPort(port):
                 builder.Connect(station.GetOutputPort(port), device.GetInputPort(port))
         if "lidar2d" in self.ptys:
-            from usvdrake.sensors.lidar_model import preset_by_name
+            from usvdrake.sensors.lidar_model import sample_rate
 
             lidar_cfg = scenario.sensors.lidar2d
-            rate = lidar_cfg.rate_hz or preset_by_name(lidar_cfg.preset).rate_hz
+            rate = sample_rate(lidar_cfg)
             lidar = builder.AddNamedSystem(
                 "rplidar", RplidarEmulator(self.ptys["lidar2d"], 1.0 / rate)
             )

@@ -45,12 +45,12 @@ def _add_oracle(builder: DiagramBuilder):
 def _add_slam(builder: DiagramBuilder, scenario: Scenario, pose=None):
     """The 2D SLAM on the exported ``lidar_scan``; its ports exported, the system returned.
     ``known_poses`` maps at ``pose`` (an output port: the oracle's estimate) instead."""
-    from usvdrake.sensors.lidar_model import preset_by_name
+    from usvdrake.sensors.lidar_model import sample_rate
     from usvdrake.systems.slam.known_pose_mapper import KnownPoseMapper
     from usvdrake.systems.slam.lidar_slam2d import HectorSlam, LidarSlam2D
 
     lidar = scenario.sensors.lidar2d
-    period = 1.0 / (lidar.rate_hz or preset_by_name(lidar.preset).rate_hz)
+    period = 1.0 / sample_rate(lidar)
     start = scenario.initial_state[:3]
     if scenario.slam.method == "known_poses":
         h = scenario.slam.hector  # the grid's extent and resolution
@@ -173,7 +173,7 @@ def taxi_grid(world_name: str, seed: int, resolution: float, inflation: float):
 def _add_taxi(builder, scenario: Scenario, vessel: VesselParams, estimate, member: str):
     """A fleet boat (000 §III): ``TaxiPilot`` (rides from the coordinator's ``task``, A*
     around the boats its lidar sees) feeding the NMPC its reference."""
-    from usvdrake.sensors.lidar_model import preset_by_name
+    from usvdrake.sensors.lidar_model import sample_rate
     from usvdrake.systems.control.nmpc_system import Nmpc
     from usvdrake.systems.guidance.taxi_pilot import TaxiPilot
 
@@ -193,9 +193,7 @@ def _add_taxi(builder, scenario: Scenario, vessel: VesselParams, estimate, membe
             me.initial_state,
             lidar_mount=lidar.mount if lidar else None,
             lidar_kind=kind,
-            lidar_period=1.0 / (lidar.rate_hz or preset_by_name(lidar.preset).rate_hz)
-            if lidar
-            else 0.1,
+            lidar_period=1.0 / sample_rate(lidar) if lidar else 0.1,
             hull_radius=float(np.hypot(vessel.hull.length, vessel.hull.beam) / 2),
             fail_at=me.fail_at if me.fail_at >= 0 else math.inf,
         ),

@@ -90,6 +90,11 @@ class LidarConfig:
     dropout: float = 0.0  # [-] probability that a beam returns nothing
 
 
+def sample_rate(cfg: "LidarConfig") -> float:
+    """[Hz] how often a lidar of ``cfg`` delivers a sweep: its own ``rate_hz`` or the preset's."""
+    return cfg.rate_hz or preset_by_name(cfg.preset).rate_hz
+
+
 def preset_by_name(name: str) -> LidarPreset:
     if name not in LIDAR_PRESETS:
         raise KeyError(

@@ -14,6 +14,7 @@ the length of the shortest collision-free path on the planning grid, not the str
   pick-ups, deliveries and failures, and the service metrics (wait and trip times).
 """
 
+import copy
 import math
 from dataclasses import dataclass, field
 
@@ -123,8 +124,6 @@ class Dispatch:
 
     def copy(self) -> "Dispatch":
         """A deep copy (Drake state must not be mutated in place)."""
-        import copy
-
         return copy.deepcopy(self)
 
     def busy(self) -> set:

@@ -7,6 +7,15 @@ from pydrake.systems.framework import LeafSystem
 from usvdrake.systems.guidance.line_of_sight import wrap_angle
 
 
+def reference_row(reference, t: float, q) -> list[float]:
+    """[ψ_ref [rad], u_ref [m/s], e [m]] of ``reference`` at time ``t`` for a vessel at ``q``
+    (e: distance to the reference position): the ``reference`` port layout the LOS guidance,
+    the reference monitor and the taxi pilot share."""
+    q_ref, _ = reference.sample(np.array([t]))
+    e = float(np.hypot(q[0] - q_ref[0, 0], q[1] - q_ref[0, 1]))
+    return [wrap_angle(q_ref[0, 2]), q_ref[0, 3], e]
+
+
 class ReferenceMonitor(LeafSystem):
     """.. pydrake_system::
 
@@ -31,10 +40,7 @@ class ReferenceMonitor(LeafSystem):
         self.DeclareVectorOutputPort("mission_complete", 1, self._calc_complete)
 
     def _calc_reference(self, context, output):
-        q_ref, _ = self._ref.sample(np.array([context.get_time()]))
-        q = self._est.Eval(context)
-        e = float(np.hypot(q[0] - q_ref[0, 0], q[1] - q_ref[0, 1]))
-        output.SetFromVector([wrap_angle(q_ref[0, 2]), q_ref[0, 3], e])
+        output.SetFromVector(reference_row(self._ref, context.get_time(), self._est.Eval(context)))
 
     def _calc_complete(self, context, output):
         done = False

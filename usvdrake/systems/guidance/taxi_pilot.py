@@ -11,7 +11,7 @@ from pydrake.systems.framework import LeafSystem
 from usvdrake.sensors.lidar_model import sensor_to_world
 from usvdrake.sensors.messages import LaserScan, PointCloud
 from usvdrake.systems.guidance.grid_astar import NoPathError, PlanningGrid
-from usvdrake.systems.guidance.line_of_sight import wrap_angle
+from usvdrake.systems.guidance.reference_monitor import reference_row
 from usvdrake.systems.guidance.reference_trajectory import HoldPose, ReferenceTrajectory
 from usvdrake.systems.guidance.taxi_planning import (
     ahead_within,
@@ -252,7 +252,5 @@ class TaxiPilot(LeafSystem):
         )
 
     def _calc_reference(self, context, output):
-        q_ref, _ = self.memory(context).reference.sample(np.array([context.get_time()]))
-        q = self._est.Eval(context)
-        e = float(np.hypot(q[0] - q_ref[0, 0], q[1] - q_ref[0, 1]))
-        output.SetFromVector([wrap_angle(q_ref[0, 2]), q_ref[0, 3], e])
+        reference = self.memory(context).reference
+        output.SetFromVector(reference_row(reference, context.get_time(), self._est.Eval(context)))
