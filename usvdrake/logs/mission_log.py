@@ -1025,4 +1025,5 @@ def read_log_vectors(path: str | Path, topic: str) -> tuple[np.ndarray, np.ndarr
             names = [k for k in m if k not in skip and isinstance(m[k], int | float)]
         times.append(t)
         rows.append([m[k] for k in names])
-    return np.array(times), np.array(rows, float).reshape(len(times), -1), names or []
+    names = names or []
+    return np.array(times), np.array(rows, float).reshape(len(times), len(names)), names
