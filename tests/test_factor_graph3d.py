@@ -145,7 +145,7 @@ def ablation(canal):
     cfg = FactorGraph3DConfig
     return {
         "lidar": drive(canal, cfg(use_gps=False, use_loop_closure=False)),
-        "gps": drive(canal, cfg(use_gps=True, use_loop_closure=False)),
+        "gps": drive(canal, cfg(use_gps=True, use_loop_closure=False, gps_min_spacing=0.0)),
         "loop": drive(canal, cfg(use_gps=False, use_loop_closure=True)),
     }
 
@@ -243,7 +243,7 @@ def test_loop_closure_found_at_start_and_reduces_end_error(ablation, canal):
 
 
 def test_gps_gate_rejects_outlier_and_bad_covariances(canal):
-    g, _ = drive(canal, FactorGraph3DConfig(use_loop_closure=False), n=8)
+    g, _ = drive(canal, FactorGraph3DConfig(use_loop_closure=False, gps_min_spacing=0.0), n=8)
     assert g.counts.gps_accepted == 8
     k = 7
     p = g.estimate()[k][:3, 3]
@@ -267,7 +267,7 @@ def test_gps_gate_rejects_outlier_and_bad_covariances(canal):
 
 def test_geodetic_fix_goes_through_the_local_frame(canal):
     frame = LocalFrame("amsterdam")
-    g, _ = drive(canal, FactorGraph3DConfig(use_loop_closure=False), n=3)
+    g, _ = drive(canal, FactorGraph3DConfig(use_loop_closure=False, gps_min_spacing=0.0), n=3)
     e, n, u = canal[0][2][:3, 3] + [0.02, -0.01, 0.1]
     lat, lon, h = frame.to_geodetic(e, n, u)
     fix = GpsFix(valid=True, latitude=lat, longitude=lon, altitude=h, covariance_enu=GPS_COV)
@@ -275,3 +275,19 @@ def test_geodetic_fix_goes_through_the_local_frame(canal):
     lat, lon, h = frame.to_geodetic(e + 30.0, n, u)  # 30 m east: gated out
     fix = GpsFix(valid=True, latitude=lat, longitude=lon, altitude=h, covariance_enu=GPS_COV)
     assert not g.add_gps_fix(2, fix, frame) and g.counts.gps_rejected == {"gate": 1}
+
+
+def test_gps_factors_spaced_and_only_while_uncertain(canal):
+    """LIO-SAM's two rules against correlated GPS error: one factor per 5 m of travel, and
+    none while the estimate's horizontal variance is below the threshold."""
+    g, _ = drive(canal, FactorGraph3DConfig(use_loop_closure=False), n=20)
+    steps = np.linalg.norm(np.diff([T[:3, 3] for T in canal[0][:20]], axis=0), axis=1)
+    assert g.counts.gps_rejected.get("spacing", 0) > 0
+    # accepted ones are ≥ 5 m apart along the drive: at most one per 5 m of travel (+ the first)
+    assert g.counts.gps_accepted <= 1 + steps.sum() / 5.0
+    assert g.counts.gps_accepted + g.counts.gps_rejected["spacing"] == 20
+    confident = FactorGraph3DConfig(
+        use_loop_closure=False, gps_min_spacing=0.0, gps_pose_variance_threshold=1.0
+    )
+    g, _ = drive(canal, confident, n=5)
+    assert g.counts.gps_accepted == 0 and g.counts.gps_rejected == {"confident": 5}

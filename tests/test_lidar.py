@@ -4,26 +4,12 @@ import dataclasses
 
 import numpy as np
 import pytest
-import shapely
+from _worlds import ROOM
 from pydrake.systems.analysis import Simulator
 
 from usvdrake.sensors.lidar2d import Lidar2D
 from usvdrake.sensors.lidar3d import Lidar3D
 from usvdrake.sensors.lidar_model import LIDAR_PRESETS, LidarConfig, body_motion, preset_by_name
-from usvdrake.worlds import World, box, cylinder
-
-ROOM = World(
-    "room",
-    0,
-    solids=[
-        box("wall", 10.5, 0, 1, 12, 0, -1, 2),
-        box("wall", -10.5, 0, 1, 12, 0, -1, 2),
-        box("wall", 0, 5.5, 22, 1, 0, -1, 2),
-        box("wall", 0, -5.5, 22, 1, 0, -1, 2),
-        cylinder("mount", 4.0, 2.0, 0.3, -1, 3),
-    ],
-    water=shapely.box(-10, -5, 10, 5),
-)
 
 
 def sample(system, port, state, t=None):

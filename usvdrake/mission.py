@@ -15,6 +15,7 @@ from usvdrake.analysis.metrics import (
     estimation_metrics,
     exploration_metrics,
     mission_metrics,
+    slam3d_metrics,
     slam_metrics,
     tracking_metrics,
     vessel_clearance,
@@ -315,6 +316,11 @@ def run_mission(
         slam_sys = autonomy.GetSubsystemByName("lidar_slam_2d")
         slam = slam_sys.slam(slam_sys.GetMyContextFromRoot(context))
         metrics.update(slam_metrics(times, states, logs["slam_pose"].data().T, slam))
+
+    if autonomy.HasSubsystemNamed("factor_graph_slam"):
+        slam_sys = autonomy.GetSubsystemByName("factor_graph_slam")
+        slam = slam_sys.slam(slam_sys.GetMyContextFromRoot(context))
+        metrics.update(slam3d_metrics(times, states, logs["slam_pose"].data().T, slam))
 
     if autonomy.HasSubsystemNamed("frontier_explorer"):
         metrics.update(

@@ -25,6 +25,7 @@ from usvdrake.systems.guidance.operator import OperatorCommandConfig, parse_mode
 from usvdrake.systems.guidance.taxi_pilot import TaxiConfig
 from usvdrake.systems.slam.graph_slam import GraphSlamConfig
 from usvdrake.systems.slam.hector import HectorConfig
+from usvdrake.systems.slam.lidar_inertial import LidarInertialConfig
 from usvdrake.typed_yaml import ConfigError, get_dotted, load_typed, resolve_yaml
 from usvdrake.vessel import VESSEL_DIR, available_vessels
 
@@ -32,7 +33,7 @@ SCENARIO_DIR = Path(__file__).parent / "scenarios"
 DEFAULT_SCENARIO = "canal_demo"
 ESTIMATORS = ("oracle", "nmhe", "observer")
 CONTROLLERS = ("baseline", "nmpc", "explore", "taxi")
-SLAM_METHODS = ("none", "graph", "hector", "known_poses")
+SLAM_METHODS = ("none", "graph", "hector", "known_poses", "factor_graph")
 
 
 @dataclass
@@ -133,9 +134,11 @@ class SlamConfig:
     # on lidar_scan (needs lidar2d). "known_poses": the exploration's ground-truth map source —
     # the same scans inserted at the true pose (grid extent and resolution from ``hector``).
     # The SLAM runs in the autonomy half as an observer; metrics score it against ground truth.
+    # "factor_graph": 000's lidar-IMU-GPS factor graph on iSAM2 (needs lidar3d, imu and gps).
     method: str = "none"
     graph: GraphSlamConfig = field(default_factory=GraphSlamConfig)
     hector: HectorConfig = field(default_factory=HectorConfig)
+    factor_graph: LidarInertialConfig = field(default_factory=LidarInertialConfig)
 
 
 @dataclass
@@ -411,7 +414,16 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
             "'known_poses' only with controller explore and estimator oracle",
             repr(s.slam.method),
         )
-    if s.slam.method != "none" and "lidar2d" not in s.sensors.enabled:
+    if s.slam.method == "factor_graph":
+        missing = [x for x in ("lidar3d", "imu", "gps") if x not in s.sensors.enabled]
+        if missing:
+            raise ConfigError(
+                file,
+                "sensors.enabled",
+                "lidar3d, imu and gps in the list (the factor graph reads them)",
+                repr(s.sensors.enabled),
+            )
+    elif s.slam.method != "none" and "lidar2d" not in s.sensors.enabled:
         raise ConfigError(
             file,
             "sensors.enabled",

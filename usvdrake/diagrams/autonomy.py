@@ -42,13 +42,15 @@ def _add_oracle(builder: DiagramBuilder):
     return oracle
 
 
-def _add_slam(builder: DiagramBuilder, scenario: Scenario, pose=None):
+def _add_slam(builder: DiagramBuilder, scenario: Scenario, world: World, pose=None):
     """The 2D SLAM on the exported ``lidar_scan``; its ports exported, the system returned.
     ``known_poses`` maps at ``pose`` (an output port: the oracle's estimate) instead."""
     from usvdrake.sensors.lidar_model import sample_rate
     from usvdrake.systems.slam.known_pose_mapper import KnownPoseMapper
     from usvdrake.systems.slam.lidar_slam2d import HectorSlam, LidarSlam2D
 
+    if scenario.slam.method == "factor_graph":
+        return _add_factor_graph_slam(builder, scenario, world.datum)
     lidar = scenario.sensors.lidar2d
     period = 1.0 / sample_rate(lidar)
     start = scenario.initial_state[:3]
@@ -67,6 +69,32 @@ def _add_slam(builder: DiagramBuilder, scenario: Scenario, pose=None):
         slam = builder.AddNamedSystem("lidar_slam_2d", slam)
     builder.ExportInput(slam.GetInputPort("lidar_scan"), "lidar_scan")
     for port in ("slam_pose", "slam_covariance", "slam_map"):
+        builder.ExportOutput(slam.GetOutputPort(port), port)
+    return slam
+
+
+def _add_factor_graph_slam(builder: DiagramBuilder, scenario: Scenario, world_datum: str):
+    """000 §V's lidar-IMU-GPS factor graph on the exported ``lidar_points``, ``imu`` and
+    ``gps``; its ports exported, the system returned."""
+    from dataclasses import replace
+
+    from usvdrake.systems.slam.factor_graph_slam import FactorGraphSlam
+
+    sensors = scenario.sensors
+    cfg = replace(scenario.slam.factor_graph, gps_antenna_height=sensors.gps.antenna_height)
+    slam = builder.AddNamedSystem(
+        "factor_graph_slam",
+        FactorGraphSlam(
+            cfg,
+            scenario.initial_state,
+            sensors.lidar3d.mount,
+            sensors.imu.rate_hz,
+            datum=sensors.gps.datum or world_datum,
+        ),
+    )
+    for port in ("lidar_points", "imu", "gps"):
+        builder.ExportInput(slam.GetInputPort(port), port)
+    for port in ("slam_pose", "slam_covariance", "slam_state", "slam_pose3d", "slam_points"):
         builder.ExportOutput(slam.GetOutputPort(port), port)
     return slam
 
@@ -223,7 +251,7 @@ def make_autonomy(
     builder = DiagramBuilder()
     if scenario.controller == "explore":
         oracle = _add_oracle(builder) if scenario.slam.method == "known_poses" else None
-        slam = _add_slam(builder, scenario, oracle.get_output_port() if oracle else None)
+        slam = _add_slam(builder, scenario, world, oracle.get_output_port() if oracle else None)
         _add_exploration(builder, scenario, vessel, world, slam, meshcat, oracle)
         autonomy = builder.Build()
         autonomy.set_name("autonomy")
@@ -287,7 +315,7 @@ def make_autonomy(
         builder.ExportOutput(allocation.GetOutputPort("tau_achieved"), "tau_achieved")
     builder.ExportOutput(estimate, "state_estimate")
     if scenario.slam.method != "none":
-        _add_slam(builder, scenario)
+        _add_slam(builder, scenario, world)
     autonomy = builder.Build()
     autonomy.set_name("autonomy")
     return autonomy

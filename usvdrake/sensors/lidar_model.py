@@ -88,6 +88,16 @@ class LidarConfig:
     motion: bool = True  # cast each beam from where the sensor was when it fired
     noise: bool = True  # add range noise (σ from the preset)
     dropout: float = 0.0  # [-] probability that a beam returns nothing
+    # Sun glare (000 §VI-A: false returns on sunny days). On a fraction ``glare_fraction`` of
+    # the sweeps, the beams pointing within ±``glare_width_deg``/2 of the sun's azimuth
+    # ``glare_azimuth_deg`` (world frame, ENU, counter-clockwise from east) return, with
+    # probability ``glare_beam_fraction`` each, a false range drawn uniformly between the
+    # sensor's minimum range and ``glare_max_range``: the receiver saturates and fires on noise.
+    glare_fraction: float = 0.0  # [-]
+    glare_azimuth_deg: float = 200.0  # [deg] sun azimuth (SSW, a low afternoon sun)
+    glare_width_deg: float = 12.0  # [deg]
+    glare_beam_fraction: float = 0.3  # [-]
+    glare_max_range: float = 30.0  # [m]
 
 
 def sample_rate(cfg: "LidarConfig") -> float:
@@ -175,7 +185,24 @@ class LidarModel:
                 ranges = np.where(ranges > self.preset.range_min, ranges, np.inf)
             if self.cfg.dropout > 0:
                 ranges = np.where(rng.random(ranges.shape) < self.cfg.dropout, np.inf, ranges)
+        if self.cfg.glare_fraction > 0:
+            ranges = self.glare(ranges, np.broadcast_to(heading, (self.layout.count,)), k)
         return Sweep(ranges, self.column_time, self.sweep_time)
+
+    def glare(self, ranges: np.ndarray, heading: np.ndarray, k: int) -> np.ndarray:
+        """Sweep k's ranges with sun-glare false returns (see ``LidarConfig.glare_*``);
+        ``heading`` [rad]: the sensor's yaw when each column fired. Seeded by (seed, stream, k)
+        on its own generator, so glare does not change the range noise."""
+        cfg = self.cfg
+        rng = generator(self.seed, self.stream + 1000, k)
+        if rng.random() >= cfg.glare_fraction:
+            return ranges
+        world_az = heading + self.layout.azimuths
+        off = np.angle(np.exp(1j * (world_az - np.deg2rad(cfg.glare_azimuth_deg))))
+        cols = np.abs(off) <= 0.5 * np.deg2rad(cfg.glare_width_deg)
+        hit = (rng.random(ranges.shape) < cfg.glare_beam_fraction) & cols[None, :]
+        false = rng.uniform(self.preset.range_min, cfg.glare_max_range, ranges.shape)
+        return np.where(hit, false, ranges)
 
     def _cast_all(self, movers: Scene | None, origin_xy, z, heading, **motion) -> np.ndarray:
         """Noise-free ranges against the world's scene and, if given, the moving solids."""

@@ -76,9 +76,18 @@ class FactorGraph3DConfig:
     prior_translation_sigma: float = 1e-2  # [m]
     # GPS factor (000 §V-B)
     use_gps: bool = True  # [-] False: GPS fixes are counted as rejected ("disabled")
-    gps_max_sigma: float = 5.0  # [m] reject a fix whose largest σ (√ of eigenvalue) exceeds
+    # [m] reject a fix whose largest horizontal σ exceeds this (LIO-SAM gpsCovThreshold); the
+    # vertical σ may be large (000 §VI-A: altitude errors of ~100 m) — it only weakens z
+    gps_max_sigma: float = 5.0
     gps_min_sigma: float = 1e-3  # [m] reject a fix whose smallest σ is below (not sane / non-PD)
     gps_gate_probability: float = 0.9999  # [-] χ²(3) gate on the innovation (21.1 for 0.9999)
+    # GPS errors are correlated over tens of seconds (GpsConfig.noise_time_constant): a factor
+    # on every keyframe would treat one wander as many independent fixes and bend the
+    # trajectory towards it. LIO-SAM adds one at most every 5 m of travel, and only while the
+    # estimate is uncertain (poseCovThreshold) — both rules here.
+    gps_min_spacing: float = 5.0  # [m] from the last keyframe that got a GPS factor
+    gps_pose_variance_threshold: float = 0.0  # [m²] only when the keyframe's horizontal
+    #                                          marginal variance exceeds this (0: always)
     # Loop closure (000 §V-C)
     use_loop_closure: bool = True  # [-]
     loop_search_radius: float = 15.0  # [m] candidate distance (000 §V-C)
@@ -213,6 +222,7 @@ class FactorGraph3D:
         self._planes: list[np.ndarray] = []  # per keyframe F^p
         self._poses: list[np.ndarray] = []  # current estimates T_world_keyframe (4 × 4)
         self._last_loop = -(10**9)
+        self._last_gps: np.ndarray | None = None  # position of the last keyframe with GPS
         self.counts = FactorGraphCounts()
         self.timings: list[KeyframeTiming] = []
         self.loops: list[tuple[int, int]] = []  # (old i, new k) of accepted loop factors
@@ -319,10 +329,12 @@ class FactorGraph3D:
 
         enu_xyz: fix in the world (local ENU) frame (3,) [m]; covariance: (3 × 3) [m²] E, N, U.
         Rejected (counted per reason in ``counts.gps_rejected``): GPS disabled; fix not valid or
-        not finite; covariance not symmetric positive definite, or with σ outside
-        [``gps_min_sigma``, ``gps_max_sigma``]; innovation beyond the χ²(3) gate of
-        ``gps_gate_probability`` (:meth:`gps_innovation`). The gate trusts the graph's marginal:
-        if drift outgrows it (an over-confident odometry model), correct fixes are refused too."""
+        not finite; covariance not symmetric positive definite, with a σ below ``gps_min_sigma``
+        or a horizontal σ above ``gps_max_sigma``; within ``gps_min_spacing`` of the last GPS
+        factor; estimate already confident (``gps_pose_variance_threshold``); innovation beyond
+        the χ²(3) gate of ``gps_gate_probability`` (:meth:`gps_innovation`). The gate trusts the
+        graph's marginal: if drift outgrows it (an over-confident odometry model), correct fixes
+        are refused too."""
         if not self.config.use_gps:
             return self._reject("disabled")
         z = np.asarray(enu_xyz, dtype=float).reshape(-1)
@@ -336,10 +348,23 @@ class FactorGraph3D:
         ):
             return self._reject("covariance")
         ev = np.linalg.eigvalsh(cov)
-        if ev[0] < self.config.gps_min_sigma**2 or ev[-1] > self.config.gps_max_sigma**2:
+        horizontal = np.linalg.eigvalsh(cov[:2, :2])[-1]
+        if ev[0] < self.config.gps_min_sigma**2 or horizontal > self.config.gps_max_sigma**2:
             return self._reject("covariance")
+        c = self.config
+        p = self._poses[k][:3, 3]
+        if self._last_gps is not None and np.linalg.norm(p[:2] - self._last_gps[:2]) < (
+            c.gps_min_spacing
+        ):
+            return self._reject("spacing")
+        if c.gps_pose_variance_threshold > 0:
+            R = self._poses[k][:3, :3]
+            P = R @ self._isam.marginalCovariance(X(k))[3:, 3:] @ R.T
+            if max(P[0, 0], P[1, 1]) < c.gps_pose_variance_threshold:
+                return self._reject("confident")
         if self.gps_innovation(k, z, cov) > self._gate:
             return self._reject("gate")
+        self._last_gps = p.copy()
         graph = gtsam.NonlinearFactorGraph()
         graph.add(gtsam.GPSFactor(X(k), z, gtsam.noiseModel.Gaussian.Covariance(cov)))
         self._isam.update(graph, gtsam.Values())
@@ -408,6 +433,20 @@ class FactorGraph3D:
     def estimate(self) -> list[np.ndarray]:
         """Current estimates T_world_keyframe (4 × 4 each), one per keyframe."""
         return [T.copy() for T in self._poses]
+
+    def estimate_of(self, k: int) -> np.ndarray:
+        """Current estimate T_world_keyframe (4 × 4) of keyframe k (negative: from the end)."""
+        return self._poses[k].copy()
+
+    @property
+    def edge_clouds(self) -> list[np.ndarray]:
+        """Per keyframe its edge features F^e (N × 3) [m], keyframe frame (read only)."""
+        return self._edges
+
+    @property
+    def planar_clouds(self) -> list[np.ndarray]:
+        """Per keyframe its planar features F^p (N × 3) [m], keyframe frame (read only)."""
+        return self._planes
 
     def marginal_covariance(self, k: int) -> np.ndarray:
         """iSAM2 marginal covariance (6 × 6) of X(k) in Pose3's tangent (ω [rad], v [m]),

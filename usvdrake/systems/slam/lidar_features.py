@@ -280,23 +280,40 @@ def organise_cloud(
     ring = np.where(lower_closer, k - 1, k)
     spacing = np.gradient(elev) if len(elev) > 1 else np.array([np.inf])
     in_ring = np.abs(e - elev[ring]) <= 0.5 * spacing[ring]
-    col = np.floor((a + np.pi) * columns / (2 * np.pi)).astype(int) % columns
+    col = azimuth_column(a, columns)
     pts, r, ring, col = pts[in_ring], r[in_ring], ring[in_ring], col[in_ring]
-    # Nearest return per pixel: sort by (pixel, range), keep the first of each pixel.
-    pix = ring * columns + col
-    order = np.lexsort((r, pix))
-    first = np.r_[True, pix[order][1:] != pix[order][:-1]]
-    keep = order[first]
-    keep = keep[np.argsort(pix[keep], kind="stable")]
-    img = np.full((len(elev), columns), np.inf)
-    img[ring[keep], col[keep]] = r[keep]
+    img, keep = nearest_per_pixel(r, ring, col, len(elev), columns)
     return PointCloud(
         time=time,
         elevations=elev,
-        azimuths=-np.pi + (np.arange(columns) + 0.5) * 2 * np.pi / columns,
+        azimuths=column_azimuths(columns),
         range_image=img,
         points=pts[keep],
         ring=ring[keep],
         column=col[keep],
         point_time=np.zeros(len(keep)),
     )
+
+
+def azimuth_column(azimuth: np.ndarray, columns: int) -> np.ndarray:
+    """Column ⌊(azimuth + π) · columns / 2π⌋ of azimuths [rad] in ``columns`` bins over [−π, π)."""
+    return np.floor((np.asarray(azimuth) + np.pi) * columns / (2 * np.pi)).astype(int) % columns
+
+
+def column_azimuths(columns: int) -> np.ndarray:
+    """Centre azimuth [rad] of each of the :func:`azimuth_column` bins."""
+    return -np.pi + (np.arange(columns) + 0.5) * 2 * np.pi / columns
+
+
+def nearest_per_pixel(
+    r: np.ndarray, ring: np.ndarray, col: np.ndarray, rings: int, columns: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """(range image rings × columns [m], inf = none; indices of the kept returns in pixel
+    order): of several returns in one pixel the nearest is kept (sort by pixel, then range)."""
+    pix = ring * columns + col
+    order = np.lexsort((r, pix))
+    keep = order[np.r_[True, pix[order][1:] != pix[order][:-1]]] if len(order) else order
+    keep = keep[np.argsort(pix[keep], kind="stable")]
+    img = np.full((rings, columns), np.inf)
+    img[ring[keep], col[keep]] = r[keep]
+    return img, keep

@@ -1,0 +1,367 @@
+"""Roboat II's lidar-IMU-GPS SLAM front end (000 §V), numerical core of ``FactorGraphSlam``.
+
+Per sensor message, in time order (:class:`LidarInertialSlam`):
+
+* **IMU** (000 §V-A: "initial guess from IMU integration since the last keyframe"):
+  :class:`ImuPropagator` integrates the gyro and the specific force from the last keyframe's
+  estimate, R ← R Exp(ω̃ Δt), v ← v + (R f̃ − g e_z) Δt, p ← p + v Δt + ½ (R f̃ − g e_z) Δt²
+  (strapdown navigation on SO(3) × R³, Forster et al., T-RO 2017, eq. (31) with the biases left
+  out: over the ≤ 1 s between keyframes a 3DM-GX5-25's biases move the guess by millimetres).
+  The velocity at a keyframe is the propagated one corrected by the registration,
+  v_k = v̂_k + (p_k − p̂_k)/Δt (the position error of one interval is a velocity error over it),
+  kept in the body frame so that a later correction of the pose turns it too.
+* **Lidar**: the predicted pose at the sweep's end decides whether the sweep is a keyframe
+  (000 §V-A, > 1 m or > 10° from the last keyframe's *estimate*); other sweeps are dropped.
+  A keyframe's points are de-skewed to the sweep's end with the constant body twist of the IMU
+  (LIO-SAM's ``deskewPoint``; each point is measured in the sensor frame of its firing time),
+  LOAM features are extracted (:func:`lidar_features.extract_features`), moved to the body
+  frame through the lidar mount, and added to :class:`FactorGraph3D`, whose registration
+  against the previous 25 keyframes starts from the IMU guess.
+* **GPS** (000 §V-B): the fixes are kept for ``gps_window`` s; a keyframe takes the valid fix
+  nearest in time within ``gps_max_offset`` (LIO-SAM: 0.2 s), converted to the local ENU frame
+  with pyproj (:class:`usvdrake.sensors.geodesy.LocalFrame`) and gated by the graph.
+
+The state is the full 3D body pose T_world_body (gtsam ``Pose3``): the controllers only use
+[x y ψ] (000 §V), but a 3D graph keeps roll, pitch and height apart from the plane's errors, so
+a wrong height from GPS altitude or a tilted registration does not leak into x, y, ψ — and the
+vertical drift is observable for the ablation (000 §VI-A).
+"""
+
+import time
+from collections import deque
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from usvdrake.sensors.geodesy import LocalFrame
+from usvdrake.sensors.imu_model import STANDARD_GRAVITY
+from usvdrake.sensors.messages import GpsFix, ImuSample, PointCloud
+from usvdrake.systems.slam.factor_graph3d import (
+    FactorGraph3D,
+    FactorGraph3DConfig,
+    KeyframeSelector,
+)
+from usvdrake.systems.slam.lidar_features import FeatureParams, LidarFeatures, extract_features
+from usvdrake.systems.slam.scan_registration3d import so3_exp, transform_points, voxel_downsample
+
+
+@dataclass
+class LidarInertialConfig:
+    """Parameters of :class:`LidarInertialSlam` (scenario ``slam.factor_graph``)."""
+
+    graph: FactorGraph3DConfig = field(default_factory=FactorGraph3DConfig)
+    features: FeatureParams = field(default_factory=FeatureParams)
+    deskew: bool = True  # [-] move each point to the sweep's end with the IMU's twist
+    gravity: float = STANDARD_GRAVITY  # [m/s²] subtracted from the rotated specific force
+    # A surface vessel does not heave (000 eq. (1) is 3-DOF): the IMU prediction keeps the
+    # vertical velocity at 0. Without it the accelerometer's z bias (3DM-GX5-25: ±0.02 m/s²)
+    # integrates into a vertical velocity that no degenerate (wall-only) match can correct,
+    # and the guess climbs metres per minute.
+    surface_vessel: bool = True
+    gps_max_offset: float = 0.2  # [s] a keyframe takes a fix at most this far in time (LIO-SAM)
+    gps_window: float = 2.0  # [s] fixes kept for association
+    gps_antenna_height: float = 0.0  # [m] antenna above the body origin (``GpsConfig``)
+    map_voxel: float = 0.5  # [m] voxel of the map drawn / returned by ``map_points``
+
+
+def pose_matrix(x: float, y: float, z: float, yaw: float) -> np.ndarray:
+    """T (4 × 4) of a pose with the given position [m] and yaw [rad] (roll = pitch = 0)."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    T = np.eye(4)
+    T[:2, :2] = [[c, -s], [s, c]]
+    T[:3, 3] = [x, y, z]
+    return T
+
+
+def planar_pose(T: np.ndarray) -> np.ndarray:
+    """[x y ψ] of a 3D pose: its position and the heading of its x axis in the x-y plane."""
+    return np.array([T[0, 3], T[1, 3], np.arctan2(T[1, 0], T[0, 0])])
+
+
+def quaternion_matrix(q_xyzw) -> np.ndarray:
+    """Rotation matrix of a unit quaternion [x y z w] (normalised first)."""
+    x, y, z, w = np.asarray(q_xyzw, dtype=float) / np.linalg.norm(q_xyzw)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def level_rotation(R: np.ndarray, q_ahrs) -> np.ndarray:
+    """The body-to-world rotation for gravity compensation: the AHRS's roll and pitch (gravity
+    referenced, as LIO-SAM takes them from the IMU's orientation) under the estimate's yaw.
+
+    A tilt error δ of the estimate would leak g sin δ into the horizontal acceleration
+    (0.17 m/s² per degree: metres within seconds); the AHRS heading (magnetic, ±0.8°) is not
+    used, the graph's yaw is better."""
+    Ra = quaternion_matrix(q_ahrs)
+    yaw_a = np.arctan2(Ra[1, 0], Ra[0, 0])
+    c, s = np.cos(yaw_a), np.sin(yaw_a)
+    Rz_a = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    yaw = np.arctan2(R[1, 0], R[0, 0])
+    c, s = np.cos(yaw), np.sin(yaw)
+    Rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return Rz @ Rz_a.T @ Ra
+
+
+class ImuPropagator:
+    """Strapdown integration of IMU samples from a known pose and velocity (see module doc).
+
+    Each sample's ω̃ and f̃ are held over the interval since the previous sample (zero-order
+    hold); before the first sample, nothing moves."""
+
+    def __init__(self, gravity: float = STANDARD_GRAVITY, surface: bool = True):
+        self.g = np.array([0.0, 0.0, gravity])
+        self.surface = surface  # no vertical velocity (see LidarInertialConfig.surface_vessel)
+        self.T = np.eye(4)  # T_world_body [m]
+        self.v = np.zeros(3)  # world-frame velocity [m/s]
+        self.t = 0.0  # [s] time of T, v
+        self.omega = np.zeros(3)  # [rad/s] last gyro sample, body frame
+        self.steps = 0  # samples integrated since the last reset
+
+    def reset(self, T: np.ndarray, v_body: np.ndarray, t: float) -> None:
+        """Restart from pose T (4 × 4) with body-frame velocity v_body [m/s] at time t [s]."""
+        self.T = np.array(T, dtype=float)
+        self.v = self.T[:3, :3] @ np.asarray(v_body, dtype=float)
+        if self.surface:
+            self.v[2] = 0.0
+        self.t = float(t)
+        self.steps = 0
+
+    def add(self, sample: ImuSample) -> None:
+        """Integrate one sample over (t, sample.time]; older samples are ignored."""
+        dt = float(sample.time) - self.t
+        if dt <= 0:
+            return
+        w = np.asarray(sample.angular_velocity, dtype=float)
+        f = np.asarray(sample.linear_acceleration, dtype=float)
+        R = self.T[:3, :3]
+        a = level_rotation(R, sample.orientation) @ f - self.g
+        if self.surface:
+            a[2] = 0.0
+        self.T[:3, 3] += self.v * dt + 0.5 * a * dt * dt
+        self.v = self.v + a * dt
+        self.T[:3, :3] = R @ so3_exp(w * dt)
+        self.t = float(sample.time)
+        self.omega = w
+        self.steps += 1
+
+    def predict(self, t: float) -> np.ndarray:
+        """The pose at time t ≥ self.t [s], extrapolated with the last rates (≤ one IMU period
+        beyond the last sample in use)."""
+        dt = max(0.0, float(t) - self.t)
+        T = self.T.copy()
+        T[:3, 3] += self.v * dt
+        T[:3, :3] = T[:3, :3] @ so3_exp(self.omega * dt)
+        return T
+
+    @property
+    def v_body(self) -> np.ndarray:
+        """Velocity in the body frame [m/s]."""
+        return self.T[:3, :3].T @ self.v
+
+
+def deskew(points: np.ndarray, age: np.ndarray, omega: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Points measured ``age`` [s] before the sweep's end, each in the sensor frame of its own
+    firing time, expressed in the sensor frame at the end; constant body twist (ω [rad/s],
+    v [m/s], sensor frame). With T(t) = T_end Exp((t − t_end) ξ) the point moves by
+    T_end⁻¹ T(t_i) = Exp(−age_i ξ): p_end = Exp(−age_i ω) p_i − age_i v (first order in the
+    translation; over a 0.1 s sweep the neglected term is ≤ ½ |ω| |v| age² ≈ 0.1 mm)."""
+    pts = np.asarray(points, dtype=float)
+    age = np.asarray(age, dtype=float)
+    th = -age[:, None] * np.asarray(omega, dtype=float)[None, :]  # rotation vector per point
+    n = np.linalg.norm(th, axis=1, keepdims=True)
+    small = n < 1e-12
+    k = np.where(small, 0.0, th / np.where(small, 1.0, n))
+    c, s = np.cos(n), np.sin(n)
+    kxp = np.cross(k, pts)
+    rotated = pts * c + kxp * s + k * np.sum(k * pts, axis=1, keepdims=True) * (1.0 - c)
+    return rotated - age[:, None] * np.asarray(v, dtype=float)[None, :]
+
+
+@dataclass
+class KeyframeRecord:
+    """What the front end knows about one keyframe (for metrics and the offline runner)."""
+
+    time: float  # [s] sweep end
+    features_ms: float  # [ms] de-skew + feature extraction
+    total_ms: float  # [ms] features + registration + iSAM2 update(s) + loop search
+    degenerate: bool  # the odometry registration found a degenerate direction
+    gps: bool  # a GPS factor was added
+    gps_valid: bool  # a valid fix was there to try (False: outage, e.g. under a bridge)
+    n_edge: int
+    n_planar: int
+    online: np.ndarray  # [x y z ψ] estimate right after the keyframe was added (online)
+
+
+class LidarInertialSlam:
+    """000 §V's SLAM over :class:`FactorGraph3D`, fed one message at a time (module doc).
+
+    initial_pose: T_world_body (4 × 4) at t0 (the vessel starts at a known pose, as Roboat II
+    starts at its dock); mount: T_body_lidar (4 × 4); frame: the ENU frame of the world (GPS
+    fixes are converted into it). Keyframe poses are the body's."""
+
+    def __init__(
+        self,
+        config: LidarInertialConfig,
+        initial_pose: np.ndarray,
+        mount: np.ndarray,
+        frame: LocalFrame | None = None,
+        t0: float = 0.0,
+    ):
+        self.config = config
+        self.graph = FactorGraph3D(config.graph)
+        self.mount = np.array(mount, dtype=float)
+        self.frame = frame
+        self.imu = ImuPropagator(config.gravity, config.surface_vessel)
+        self.imu.reset(initial_pose, np.zeros(3), t0)
+        self.selector = KeyframeSelector(
+            config.graph.keyframe_translation, config.graph.keyframe_rotation
+        )
+        self._fixes: deque[GpsFix] = deque()
+        self.keyframes: list[KeyframeRecord] = []
+        self.sweeps = 0  # lidar sweeps seen
+        self.imu_samples = 0
+
+    # --- inputs ----------------------------------------------------------------------------------
+
+    def add_imu(self, sample: ImuSample) -> None:
+        self.imu.add(sample)
+        self.imu_samples += 1
+
+    def add_gps(self, fix: GpsFix) -> None:
+        """Keep a fix for association with the next keyframes (invalid fixes are kept too: the
+        graph counts them as rejected)."""
+        self._fixes.append(fix)
+        while self._fixes and self._fixes[0].time < fix.time - self.config.gps_window:
+            self._fixes.popleft()
+
+    def _fix_near(self, t: float) -> GpsFix | None:
+        best = min(self._fixes, key=lambda f: abs(f.time - t), default=None)
+        if best is None or abs(best.time - t) > self.config.gps_max_offset:
+            return None
+        return best
+
+    def add_cloud(self, cloud: PointCloud) -> bool:
+        """Process one sweep; True when it became keyframe (then the pose estimate is
+        corrected)."""
+        self.sweeps += 1
+        T_pred = self.imu.predict(cloud.time)
+        if not self.selector.is_keyframe(T_pred):
+            return False
+        t0 = time.perf_counter()
+        features = self.features(cloud)
+        features_s = time.perf_counter() - t0
+        g, c = self.graph, self.config
+        fix = self._fix_near(cloud.time)
+        k = g.add_keyframe(T_pred, features)
+        gps = False
+        if fix is not None and self.frame is not None:
+            t1 = time.perf_counter()
+            e, n, u = self.frame.to_local(fix.latitude, fix.longitude, fix.altitude)
+            enu = np.array([e, n, u - c.gps_antenna_height])  # antenna → body origin
+            gps = g.add_gps(k, enu, fix.covariance_enu, fix.valid)
+            g.timings[-1].update += time.perf_counter() - t1
+        timing = g.timings[-1]
+        res = g.registrations[-1]
+        self.keyframes.append(
+            KeyframeRecord(
+                time=float(cloud.time),
+                features_ms=1e3 * features_s,
+                total_ms=1e3 * (features_s + timing.total),
+                degenerate=bool(res.degenerate) if res is not None else False,
+                gps=gps,
+                gps_valid=fix is not None and bool(fix.valid),
+                n_edge=len(features.edge_points),
+                n_planar=len(features.planar_points),
+                online=np.r_[g.estimate_of(-1)[:3, 3], planar_pose(g.estimate_of(-1))[2]],
+            )
+        )
+        self._restart_imu(cloud.time, T_pred)
+        return True
+
+    def _restart_imu(self, t: float, T_pred: np.ndarray) -> None:
+        """Restart the IMU from the keyframe's estimate. The velocity is corrected with the lidar
+        odometry alone (the registered pose, before GPS and loop factors move the keyframe): a
+        GPS fix's metre of noise divided by the 0.7 s between keyframes would be a 1 m/s error
+        in the next guess."""
+        T_k = self.graph.estimate_of(-1)
+        res = self.graph.registrations[-1]
+        T_reg = res.T if res is not None and np.all(np.isfinite(res.T)) else T_pred
+        dt = t - self.keyframes[-2].time if len(self.keyframes) > 1 else 0.0
+        v_world = self.imu.v
+        if dt > 0:
+            v_world = v_world + (T_reg[:3, 3] - T_pred[:3, 3]) / dt
+        self.imu.reset(T_k, T_reg[:3, :3].T @ v_world, t)
+        self.selector.last = T_k.copy()
+
+    def features(self, cloud: PointCloud) -> LidarFeatures:
+        """De-skewed LOAM features of a sweep in the body frame."""
+        c = self.config
+        if c.deskew and cloud.motion_applied and len(cloud.points):
+            R_bl, t_bl = self.mount[:3, :3], self.mount[:3, 3]
+            w_body = self.imu.omega
+            v_lidar = R_bl.T @ (self.imu.v_body + np.cross(w_body, t_bl))
+            age = cloud.sweep_time - np.asarray(cloud.point_time, dtype=float)
+            pts = deskew(cloud.points, age, R_bl.T @ w_body, v_lidar)
+            cloud = replace(cloud, points=pts)
+        f = extract_features(cloud, c.features)
+        return replace(
+            f,
+            edge_points=transform_points(self.mount, f.edge_points),
+            planar_points=transform_points(self.mount, f.planar_points),
+        )
+
+    # --- outputs ---------------------------------------------------------------------------------
+
+    def pose(self, t: float | None = None) -> np.ndarray:
+        """Current T_world_body (4 × 4): the last keyframe's estimate propagated by the IMU."""
+        return self.imu.predict(self.imu.t if t is None else t)
+
+    def state(self) -> np.ndarray:
+        """[x y ψ u v r] for the controllers (body velocities from the IMU propagation)."""
+        T = self.imu.T
+        vb = self.imu.v_body
+        return np.r_[planar_pose(T), vb[0], vb[1], self.imu.omega[2]]
+
+    def planar_covariance(self) -> np.ndarray:
+        """Covariance (3 × 3) of [x y ψ] of the last keyframe in the world frame, from the
+        iSAM2 marginal of its Pose3 (tangent (ω, v), body frame): Σ_xy = (R Σ_vv Rᵀ)[:2, :2],
+        σ²_ψ = Σ_ωzωz (rotation about the vertical, roll and pitch small)."""
+        if not self.keyframes:
+            return np.diag([1e-4, 1e-4, 1e-6])
+        k = len(self.keyframes) - 1
+        P = self.graph.marginal_covariance(k)
+        R = self.graph.estimate_of(k)[:3, :3]
+        J = np.zeros((3, 6))
+        J[:2, 3:] = R[:2, :]
+        J[2, :3] = R[2, :]  # world z component of the body rotation vector
+        return J @ P @ J.T
+
+    def map_points(self) -> np.ndarray:
+        """All keyframes' features in the world frame at their current estimates, voxel
+        down-sampled (``map_voxel``)."""
+        g = self.graph
+        poses = g.estimate()
+        if not poses:
+            return np.zeros((0, 3))
+        clouds = [
+            transform_points(T, np.vstack([e, p]))
+            for T, e, p in zip(poses, g.edge_clouds, g.planar_clouds, strict=True)
+        ]
+        return voxel_downsample(np.vstack(clouds), self.config.map_voxel)
+
+    def trajectory(self) -> tuple[np.ndarray, np.ndarray]:
+        """(keyframe times (n,), current keyframe estimates (n × 4 × 4))."""
+        poses = self.graph.estimate()
+        return np.array([k.time for k in self.keyframes]), np.array(poses).reshape(-1, 4, 4)
+
+    def __deepcopy__(self, memo) -> "LidarInertialSlam":
+        """Shared, not copied: gtsam's iSAM2 Bayes tree cannot be copied, and Drake copies a
+        Context's abstract state on every unrestricted update. Every copy is this object, so one
+        simulation is exact; two Contexts of one ``FactorGraphSlam`` would share a SLAM (build a
+        diagram per run)."""
+        return self
