@@ -1,5 +1,5 @@
 """The ``usvdrake`` command: ``run`` a scenario, ``campaign`` it over random days, ``bench`` a
-benchmark, ``identify`` ξ."""
+benchmark, ``identify`` ξ, run SLAM offline (``slam2d``, ``slam3d``, ``slam3d-ablation``)."""
 
 import argparse
 import runpy
@@ -342,6 +342,43 @@ def make_parser() -> argparse.ArgumentParser:
     m.add_argument("--max-scans", type=int, default=None, help="stop after this many scans")
     m.add_argument("--quiet", action="store_true", help="no progress bar")
     m.set_defaults(func=cmd_slam2d)
+    s3 = sub.add_parser("slam3d", help="lidar-IMU-GPS factor-graph SLAM (000 §V) on a recording")
+    s3.add_argument("log", help="mission log (.mcap or run folder), ROS 1 .bag or ROS 2 bag folder")
+    s3.add_argument("--out", default=None, help="write metrics.json and trajectory.tum here")
+    s3.add_argument("--lidar-topic", default=None, help="PointCloud2 / /lidar_points topic")
+    s3.add_argument("--imu-topic", default=None, help="Imu / /imu topic")
+    s3.add_argument("--gps-topic", default=None, help="NavSatFix / /gps topic")
+    s3.add_argument(
+        "--datum", default=None, help="origin of the world ENU frame (default: amsterdam)"
+    )
+    s3.add_argument(
+        "--scenario",
+        default=None,
+        help="take the SLAM config, lidar mount and datum from this scenario (default: defaults)",
+    )
+    s3.add_argument("--no-gps", action="store_true", help="no GPS factors")
+    s3.add_argument("--no-loop", action="store_true", help="no loop closures")
+    s3.add_argument("--quiet", action="store_true", help="no progress bar")
+    s3.set_defaults(func=cmd_slam3d)
+    ab = sub.add_parser(
+        "slam3d-ablation",
+        help="000 §VI-A ablation: lidar / + GPS / + GPS + loop on a recording or a scenario",
+    )
+    ab.add_argument(
+        "source",
+        help="mission log or ROS bag; or a scenario (name or YAML, slam.method factor_graph) "
+        "to record first",
+    )
+    ab.add_argument("--out", default="out/slam3d_ablation", help="output folder")
+    ab.add_argument(
+        "--duration", type=float, default=None, help="scenario: override the simulated duration"
+    )
+    ab.add_argument(
+        "--scenario", default=None, help="recording: take SLAM config, mount, datum from this"
+    )
+    ab.add_argument("--datum", default=None, help="origin of the world ENU frame")
+    ab.add_argument("--quiet", action="store_true", help="no progress bar")
+    ab.set_defaults(func=cmd_slam3d_ablation)
     a = sub.add_parser("analyze", help="analyses of a scenario's closed loop")
     what = a.add_subparsers(dest="analysis", required=True)
     st = what.add_parser(
@@ -390,6 +427,113 @@ def cmd_slam2d(args) -> int:
             else f"  {key:<{width}} {value}"
         )
     print(f"  trajectory.tum, map.png, metrics.json in {args.out}")
+    return 0
+
+
+def _slam3d_settings(scenario=None):
+    """(config, mount, datum) of a scenario's (a Scenario, name or YAML path) factor-graph SLAM;
+    None: the scenario defaults (``slam.factor_graph``, the GPS antenna height, the 3D lidar's
+    mount) and the datum ``amsterdam``."""
+    from dataclasses import replace
+
+    from usvdrake.scenario import Scenario, load_scenario
+    from usvdrake.slam3d import settings_from_scenario
+
+    if scenario is None:
+        s = Scenario()
+        config = replace(s.slam.factor_graph, gps_antenna_height=s.sensors.gps.antenna_height)
+        return config, list(s.sensors.lidar3d.mount), "amsterdam"
+    if not isinstance(scenario, Scenario):
+        scenario = load_scenario(scenario)
+    if scenario.slam.method != "factor_graph":
+        raise ConfigError(scenario.name, "slam.method", "factor_graph", repr(scenario.slam.method))
+    return settings_from_scenario(scenario)
+
+
+def _is_recording(text: str) -> bool:
+    """A mission log (.mcap or a folder with log.mcap) or a ROS bag, as opposed to a scenario."""
+    from usvdrake.logs.rosbag import is_bag
+
+    p = Path(text)
+    return (p.is_file() and p.suffix in (".mcap", ".bag")) or (
+        p.is_dir() and ((p / "log.mcap").is_file() or is_bag(p))
+    )
+
+
+def cmd_slam3d(args) -> int:
+    """000 §V's lidar-IMU-GPS SLAM on a recording: metrics JSON to stdout; with --out,
+    DIR/metrics.json and DIR/trajectory.tum (keyframes, final estimates)."""
+    import json
+
+    from usvdrake.slam3d import run_slam3d, variant_config, write_keyframes_tum
+
+    if not Path(args.log).exists():
+        raise ConfigError(
+            args.log, "", "a mission log (.mcap or run folder) or a ROS 1/2 bag", "no such file"
+        )
+    config, mount, datum = _slam3d_settings(args.scenario)
+    config = variant_config(
+        config,
+        config.graph.use_gps and not args.no_gps,
+        config.graph.use_loop_closure and not args.no_loop,
+    )
+    result = run_slam3d(
+        args.log,
+        config,
+        mount=mount,
+        datum=args.datum or datum,
+        progress=not args.quiet,
+        lidar_topic=args.lidar_topic,
+        imu_topic=args.imu_topic,
+        gps_topic=args.gps_topic,
+    )
+    text = json.dumps(result.metrics, indent=2)
+    print(text)
+    if args.out:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "metrics.json").write_text(text + "\n")
+        write_keyframes_tum(out / "trajectory.tum", result)
+        print(f"  metrics.json, trajectory.tum in {out}", file=sys.stderr)
+    return 0
+
+
+def cmd_slam3d_ablation(args) -> int:
+    """000 §VI-A's ablation (lidar / + GPS / + GPS + loop) on a recording, or on a scenario
+    recorded first into DIR/recording: table to stdout, DIR/ablation.json, DIR/ablation.png."""
+    import json
+
+    from usvdrake.slam3d import ablation_rows, format_table, plot_ablation, run_ablation
+
+    out = Path(args.out)
+    source = args.source
+    if _is_recording(source):
+        config, mount, datum = _slam3d_settings(args.scenario)
+        log = Path(source)
+    else:
+        from usvdrake.mission import run_mission
+        from usvdrake.scenario import load_scenario, with_overrides
+
+        if Path(source).suffix in (".mcap", ".bag") and not Path(source).exists():
+            raise ConfigError(source, "", "a mission log, a ROS bag or a scenario", "no such file")
+        scenario = with_overrides(load_scenario(source), duration=args.duration)
+        config, mount, datum = _slam3d_settings(scenario)
+        recording = out / "recording"
+        print(f"usvdrake slam3d-ablation: recording {scenario.name} into {recording}")
+        run_mission(scenario, out_dir=recording, record=False, progress=not args.quiet)
+        log = recording / "log.mcap"
+    results = run_ablation(
+        log, config, mount=mount, datum=args.datum or datum, progress=not args.quiet
+    )
+    rows = ablation_rows(results)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "ablation.json").write_text(
+        json.dumps({"log": str(log), "variants": rows}, indent=2) + "\n"
+    )
+    plot_ablation(results, results[0].truth, out / "ablation.png")
+    print(f"usvdrake slam3d-ablation {log} (000 §VI-A)")
+    print(format_table(rows))
+    print(f"  ablation.json, ablation.png in {out}")
     return 0
 
 

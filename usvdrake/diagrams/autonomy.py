@@ -76,20 +76,14 @@ def _add_slam(builder: DiagramBuilder, scenario: Scenario, world: World, pose=No
 def _add_factor_graph_slam(builder: DiagramBuilder, scenario: Scenario, world_datum: str):
     """000 §V's lidar-IMU-GPS factor graph on the exported ``lidar_points``, ``imu`` and
     ``gps``; its ports exported, the system returned."""
-    from dataclasses import replace
-
+    from usvdrake.slam3d import settings_from_scenario
     from usvdrake.systems.slam.factor_graph_slam import FactorGraphSlam
 
-    sensors = scenario.sensors
-    cfg = replace(scenario.slam.factor_graph, gps_antenna_height=sensors.gps.antenna_height)
+    cfg, mount, datum = settings_from_scenario(scenario, world_datum)
     slam = builder.AddNamedSystem(
         "factor_graph_slam",
         FactorGraphSlam(
-            cfg,
-            scenario.initial_state,
-            sensors.lidar3d.mount,
-            sensors.imu.rate_hz,
-            datum=sensors.gps.datum or world_datum,
+            cfg, scenario.initial_state, mount, scenario.sensors.imu.rate_hz, datum=datum
         ),
     )
     for port in ("lidar_points", "imu", "gps"):

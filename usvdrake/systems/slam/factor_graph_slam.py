@@ -16,6 +16,7 @@ from usvdrake.systems.slam.lidar_inertial import (
 # Offset of the SLAM's tick after the sensors' sample instants: the IMU, GPS and lidar update at
 # multiples of their periods, so a tick 1 ms later reads the sample of that same instant.
 TICK_DELAY = 1e-3  # [s]
+MIN_CLOUD_POINTS = 100  # sweeps with fewer returns are skipped (the empty message before the first)
 
 
 def mount_matrix(mount) -> np.ndarray:
@@ -109,7 +110,7 @@ class FactorGraphSlam(LeafSystem):
             slam.add_gps(fix)
             seen[1] = fix.time
         cloud = self._cloud.Eval(context)
-        if cloud.time > seen[2] and len(cloud.points) >= 100:
+        if cloud.time > seen[2] and len(cloud.points) >= MIN_CLOUD_POINTS:
             slam.add_cloud(cloud)
             seen[2] = cloud.time
         state.get_mutable_discrete_state(self._seen).SetFromVector(seen)

@@ -1,0 +1,69 @@
+"""Benchmark: per-keyframe cost of 000 §V's lidar-IMU-GPS SLAM on the canal survey's sensors.
+
+Records ``--duration`` s of the ``canal_survey`` scenario (VLP-16 at 10 Hz, IMU at 50 Hz, GPS at
+5 Hz, along Amsterdam's inner ring), or takes an existing mission log (``--log``), and replays
+it offline through :class:`usvdrake.systems.slam.lidar_inertial.LidarInertialSlam` with the
+scenario's configuration (:func:`usvdrake.slam3d.run_slam3d`, the same order of messages as the
+live ``FactorGraphSlam``). Per keyframe: de-skew + feature extraction + scan-to-submap
+registration + iSAM2 update(s), GPS and loop factors included.
+
+Prints one JSON object: ``keyframe_ms_median`` / ``keyframe_ms_p95`` (targets 40 / 80 ms;
+000 §VI-A: 79.3 ms average on a NUC i7), ``features_ms_median``, the split of the median
+keyframe into registration / update / loop, keyframes, ``ate_m`` and ``realtime_factor`` of the
+replay. The replay only measures the SLAM (no simulation in the loop).
+"""
+
+import argparse
+import json
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from usvdrake.scenario import load_scenario, with_overrides
+from usvdrake.slam3d import run_slam3d, settings_from_scenario
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--duration", type=float, default=120.0, help="[s] of canal_survey")
+    parser.add_argument("--log", help="an existing mission log instead of recording one")
+    args = parser.parse_args()
+    scenario = with_overrides(load_scenario("canal_survey"), duration=args.duration)
+    config, mount, datum = settings_from_scenario(scenario)
+    with tempfile.TemporaryDirectory() as tmp:
+        log = Path(args.log) if args.log else None
+        if log is None:
+            from usvdrake.mission import run_mission
+
+            run_mission(scenario, out_dir=tmp, record=False)
+            log = Path(tmp) / "log.mcap"
+        result = run_slam3d(log, config, mount=mount, datum=datum)
+    m = result.metrics
+    timings = np.array([[t.registration, t.update, t.loop] for t in result.slam.graph.timings])
+    split = np.median(timings, axis=0) * 1e3 if len(timings) else np.zeros(3)
+    print(
+        json.dumps(
+            {
+                "benchmark": "slam3d_keyframe",
+                "log": str(args.log) if args.log else f"canal_survey {args.duration:g} s",
+                "keyframes": m.get("slam_keyframes", 0),
+                "keyframe_ms_median": m.get("keyframe_ms_median"),
+                "keyframe_ms_p95": m.get("keyframe_ms_p95"),
+                "keyframe_ms_max": m.get("keyframe_ms_max"),
+                "features_ms_median": m.get("features_ms_median"),
+                "registration_ms_median": float(split[0]),
+                "update_ms_median": float(split[1]),
+                "loop_ms_median": float(split[2]),
+                "target_median_ms": 40.0,
+                "target_p95_ms": 80.0,
+                "ate_m": m.get("ate_m"),
+                "replay_realtime_factor": m.get("realtime_factor"),
+            },
+            indent=2,
+        )
+    )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,394 @@
+"""Offline lidar-IMU-GPS SLAM (000 §V) on recorded sensors, and the ablation of 000 §VI-A.
+
+:func:`run_slam3d` replays the lidar sweeps, IMU samples and GNSS fixes of a mission log
+(``/lidar_points``, ``/imu``, ``/gps``) or a ROS bag (PointCloud2, Imu, NavSatFix; read by
+:func:`usvdrake.logs.sensor_stream.read_sensor_stream`) through :class:`LidarInertialSlam`
+exactly as the live :class:`~usvdrake.systems.slam.factor_graph_slam.FactorGraphSlam` feeds it:
+
+* in time order; messages of one instant (within :data:`SAME_TIME` s, one tick of the live
+  system) IMU first, then GPS, then lidar — so a sweep ending at t is predicted with the IMU up
+  to t and can use the fix of t;
+* per kind only a message newer than the last one taken, and only sweeps of at least
+  :data:`MIN_CLOUD_POINTS` points (``FactorGraphSlam._update``);
+* the online pose [x y ψ] is sampled at every ground-truth time t *before* the messages of t are
+  taken (the live system ticks ``TICK_DELAY`` after the sensors, so its logged ``slam_pose`` at
+  t has seen the messages before t), as ``slam.pose()`` — the last keyframe propagated to the
+  last IMU sample, what the ``slam_pose`` port outputs — so :func:`slam3d_metrics` scores the
+  offline run like the live one.
+
+:func:`ablation` runs the three variants of 000 §VI-A on one recording — lidar only, lidar +
+GPS, lidar + GPS + loop closure — and :func:`format_table` / :func:`plot_ablation` show them.
+"""
+
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from usvdrake.analysis.metrics import slam3d_metrics
+from usvdrake.logs.sensor_stream import SensorMessage, read_ground_truth, read_sensor_stream
+from usvdrake.sensors.geodesy import LocalFrame
+from usvdrake.systems.slam.factor_graph_slam import MIN_CLOUD_POINTS, mount_matrix
+from usvdrake.systems.slam.lidar_inertial import (
+    LidarInertialConfig,
+    LidarInertialSlam,
+    planar_pose,
+    pose_matrix,
+)
+
+SAME_TIME = 1e-6  # [s] messages closer than this are of one instant (ordered IMU, GPS, lidar)
+KIND_ORDER = {"imu": 0, "gps": 1, "lidar": 2}
+
+# the variants of 000 §VI-A: (name, use_gps, use_loop_closure)
+VARIANTS = (
+    ("lidar", False, False),
+    ("lidar+gps", True, False),
+    ("lidar+gps+loop", True, True),
+)
+# the columns of an ablation row (metrics of :func:`slam3d_metrics`)
+ABLATION_KEYS = (
+    "ate_m",
+    "ate_final_m",
+    "loop_return_error_m",
+    "vertical_error_final_m",
+    "vertical_error_max_m",
+    "keyframe_ms_median",
+    "keyframe_ms_p95",
+    "gps_factors",
+    "loop_closures",
+    "degenerate_segments",
+    "degenerate_max_error_m",
+)
+
+
+@dataclass
+class Slam3DResult:
+    """What :func:`run_slam3d` gives back.
+
+    ``metrics``: :func:`slam3d_metrics` against ground truth (when the log has it) plus message
+    counts and timings; ``keyframe_times`` (n,) [s] and ``keyframe_poses`` (n × 4 × 4)
+    T_world_body: the final estimates; ``slam``: the :class:`LidarInertialSlam` after the run;
+    ``initial_pose_source``: ``"given"``, ``"ground_truth"`` or ``"identity"``; ``truth``:
+    (times, states n × 6) of the log's ``/ground_truth`` or None; ``online``: [x y ψ] online at
+    the ground-truth times (n × 3, empty without ground truth)."""
+
+    metrics: dict
+    keyframe_times: np.ndarray
+    keyframe_poses: np.ndarray
+    slam: LidarInertialSlam
+    initial_pose_source: str
+    truth: tuple[np.ndarray, np.ndarray] | None = None
+    online: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+
+
+def _mount(mount) -> np.ndarray:
+    m = np.asarray(mount, dtype=float)
+    if m.shape == (4, 4):
+        return m.copy()
+    if m.shape == (4,):
+        return mount_matrix(m)
+    raise ValueError(f"mount: expected [x y z yaw] or a 4 × 4 matrix, got shape {m.shape}")
+
+
+def _ticks(stream: Iterator[SensorMessage]) -> Iterator[tuple[float, list[SensorMessage]]]:
+    """Groups of messages of one instant (within SAME_TIME of the group's first), each group
+    ordered IMU, GPS, lidar (stable within a kind)."""
+    group: list[SensorMessage] = []
+    for m in stream:
+        if group and m.time > group[0].time + SAME_TIME:
+            yield group[0].time, sorted(group, key=lambda g: KIND_ORDER[g.kind])
+            group = []
+        group.append(m)
+    if group:
+        yield group[0].time, sorted(group, key=lambda g: KIND_ORDER[g.kind])
+
+
+def settings_from_scenario(
+    scenario, world_datum: str | None = None
+) -> tuple[LidarInertialConfig, list, str]:
+    """(config, mount [x y z yaw], datum) of ``scenario``'s SLAM, live
+    (``autonomy._add_factor_graph_slam``) and offline: ``slam.factor_graph`` with the GPS
+    antenna height, the 3D lidar's mount, ``sensors.gps.datum`` or the world's datum
+    (``world_datum``, or the scenario's world built to read it)."""
+    sensors = scenario.sensors
+    config = replace(scenario.slam.factor_graph, gps_antenna_height=sensors.gps.antenna_height)
+    datum = sensors.gps.datum or world_datum
+    if not datum:
+        from usvdrake.worlds import make_world
+
+        datum = make_world(scenario.world, scenario.seed).datum
+    return config, list(sensors.lidar3d.mount), datum
+
+
+def run_slam3d(
+    path: str | Path,
+    config: LidarInertialConfig,
+    initial_pose: np.ndarray | None = None,
+    mount=(0.0, 0.0, 1.0, 0.0),
+    datum: str | None = "amsterdam",
+    progress: bool = False,
+    lidar_topic: str | None = None,
+    imu_topic: str | None = None,
+    gps_topic: str | None = None,
+    t0: float | None = None,
+    description: str = "",
+) -> Slam3DResult:
+    """Run :class:`LidarInertialSlam` over a recording (module doc) and score it.
+
+    Parameters
+    ----------
+    path
+        A mission log (``.mcap`` or its run folder) or a ROS 1/2 bag.
+    config
+        The SLAM's parameters (not modified).
+    initial_pose
+        T_world_body (4 × 4) at the start; None: the log's first ground-truth state (x, y, ψ at
+        height 0, as the live run starts from ``initial_state``), else the identity.
+    mount
+        T_body_lidar: [x y z yaw] [m, rad] (``LidarConfig.mount``) or 4 × 4.
+    datum
+        Origin of the world's ENU frame (:data:`usvdrake.sensors.geodesy.DATUMS`); None: GPS
+        fixes are not used.
+    progress
+        A tqdm progress bar over the messages.
+    lidar_topic, imu_topic, gps_topic
+        Topics to read (:func:`read_sensor_stream`; None: the defaults).
+    t0
+        [s] time of the initial pose; None: the first ground-truth time with the ground-truth
+        pose, else the first message's time.
+    description
+        A label stored as ``metrics["variant"]`` when given.
+
+    Raises
+    ------
+    ConfigError
+        The path is not a recording, a topic is missing, or there are no sensor messages.
+    """
+    path = Path(path)
+    stream = read_sensor_stream(path, lidar_topic, imu_topic, gps_topic)
+    truth = read_ground_truth(path)
+    first = next(stream, None)
+    source = "given"
+    if initial_pose is None:
+        if truth is not None and len(truth[0]):
+            x, y, psi = truth[1][0, :3]
+            initial_pose = pose_matrix(x, y, 0.0, psi)
+            source = "ground_truth"
+            t0 = float(truth[0][0]) if t0 is None else t0
+        else:
+            initial_pose = np.eye(4)
+            source = "identity"
+    if t0 is None:
+        t0 = first.time if first is not None else 0.0
+    frame = LocalFrame(datum) if datum else None
+    slam = LidarInertialSlam(config, np.asarray(initial_pose, float), _mount(mount), frame, t0)
+
+    def messages():
+        if first is not None:
+            yield first
+        yield from stream
+
+    it = messages()
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(unit="msg", desc=f"slam3d {description or path.name}")
+    gt_t = truth[0] if truth is not None else np.zeros(0)
+    online = np.zeros((len(gt_t), 3))
+    i = 0  # next ground-truth time to sample
+    seen = {"imu": -np.inf, "gps": -np.inf, "lidar": -np.inf}
+    counts = {"imu": 0, "gps": 0, "lidar": 0}
+    skipped_clouds = 0
+    wall0 = time.perf_counter()
+    t_first = t_last = None
+    for t, group in _ticks(it):
+        while i < len(gt_t) and gt_t[i] <= t + SAME_TIME:  # before the messages of gt_t[i]
+            online[i] = planar_pose(slam.pose())
+            i += 1
+        t_first = t if t_first is None else t_first
+        t_last = t
+        for m in group:
+            counts[m.kind] += 1
+            if m.time <= seen[m.kind]:
+                continue
+            if m.kind == "imu":
+                slam.add_imu(m.msg)
+            elif m.kind == "gps":
+                slam.add_gps(m.msg)
+            elif len(m.msg.points) >= MIN_CLOUD_POINTS:
+                slam.add_cloud(m.msg)
+            else:
+                skipped_clouds += 1
+                continue
+            seen[m.kind] = m.time
+        if bar is not None:
+            bar.update(len(group))
+    while i < len(gt_t):
+        online[i] = planar_pose(slam.pose())
+        i += 1
+    wall = time.perf_counter() - wall0
+    if bar is not None:
+        bar.close()
+
+    duration = float(t_last - t_first) if t_first is not None else 0.0
+    metrics: dict = {"log": str(path)}
+    if description:
+        metrics["variant"] = description
+    metrics |= {
+        "use_gps": bool(config.graph.use_gps and frame is not None),
+        "use_loop_closure": bool(config.graph.use_loop_closure),
+        "initial_pose": source,
+        "lidar_messages": counts["lidar"],
+        "imu_messages": counts["imu"],
+        "gps_messages": counts["gps"],
+        "sparse_sweeps_skipped": skipped_clouds,
+        "wall_time_s": wall,
+        "log_duration_s": duration,
+        "realtime_factor": duration / wall if wall > 0 else 0.0,
+    }
+    if truth is not None and len(gt_t):
+        metrics |= slam3d_metrics(gt_t, truth[1], online, slam)
+    else:
+        metrics |= _counts(slam)
+    kt, poses = slam.trajectory()
+    return Slam3DResult(metrics, kt, poses, slam, source, truth, online)
+
+
+def _counts(slam: LidarInertialSlam) -> dict:
+    """Counts and timings of a run without ground truth."""
+    recs = slam.keyframes
+    ms = np.array([r.total_ms for r in recs])
+    c = slam.graph.counts
+    return {
+        "slam_keyframes": len(recs),
+        "slam_sweeps": int(slam.sweeps),
+        "keyframe_ms_median": float(np.median(ms)) if len(ms) else None,
+        "keyframe_ms_p95": float(np.percentile(ms, 95)) if len(ms) else None,
+        "keyframe_ms_max": float(np.max(ms)) if len(ms) else None,
+        "gps_factors": int(c.gps_accepted),
+        "gps_rejected": dict(c.gps_rejected),
+        "loop_candidates": int(c.loop_candidates),
+        "loop_closures": int(c.loop_closures),
+        "degenerate_keyframes": int(sum(r.degenerate for r in recs)),
+    }
+
+
+def variant_config(config: LidarInertialConfig, use_gps: bool, use_loop: bool):
+    """A copy of ``config`` with the graph's GPS and loop-closure switches set."""
+    graph = replace(config.graph, use_gps=use_gps, use_loop_closure=use_loop)
+    return replace(config, graph=graph)
+
+
+def run_ablation(path: str | Path, config: LidarInertialConfig, **kwargs) -> list[Slam3DResult]:
+    """The three runs of 000 §VI-A's ablation on one recording (:data:`VARIANTS`: lidar only;
+    lidar + GPS; lidar + GPS + loop closure), one after the other; ``kwargs`` go to
+    :func:`run_slam3d`. ``config`` is not modified."""
+    return [
+        run_slam3d(path, variant_config(config, gps, loop), description=name, **kwargs)
+        for name, gps, loop in VARIANTS
+    ]
+
+
+def ablation_rows(results: list[Slam3DResult]) -> list[dict]:
+    """One row per variant: its name, switches and :data:`ABLATION_KEYS` (None if missing)."""
+    rows = []
+    for r in results:
+        m = r.metrics
+        row = {
+            "variant": m.get("variant", ""),
+            "use_gps": m["use_gps"],
+            "use_loop_closure": m["use_loop_closure"],
+            "keyframes": m.get("slam_keyframes"),
+        }
+        rows.append(row | {k: m.get(k) for k in ABLATION_KEYS})
+    return rows
+
+
+def ablation(path: str | Path, config: LidarInertialConfig, **kwargs) -> list[dict]:
+    """000 §VI-A's ablation as rows (:func:`run_ablation`, :func:`ablation_rows`)."""
+    return ablation_rows(run_ablation(path, config, **kwargs))
+
+
+def format_table(rows: list[dict]) -> str:
+    """A plain fixed-width table of ablation rows (one line per variant)."""
+    if not rows:
+        return "(no rows)"
+    keys = list(rows[0])
+
+    def cell(v) -> str:
+        if v is None:
+            return "-"
+        if isinstance(v, bool):
+            return "yes" if v else "no"
+        if isinstance(v, float):
+            return f"{v:.3f}"
+        return str(v)
+
+    cells = [[cell(r.get(k)) for k in keys] for r in rows]
+    widths = [max(len(k), *(len(c[j]) for c in cells)) for j, k in enumerate(keys)]
+    lines = [
+        "  ".join(
+            k.rjust(w) if j else k.ljust(w)
+            for j, (k, w) in enumerate(zip(keys, widths, strict=True))
+        )
+    ]
+    lines.append("  ".join("-" * w for w in widths))
+    for c in cells:
+        lines.append(
+            "  ".join(
+                v.rjust(w) if j else v.ljust(w)
+                for j, (v, w) in enumerate(zip(c, widths, strict=True))
+            )
+        )
+    return "\n".join(lines)
+
+
+def plot_ablation(
+    results: list[Slam3DResult],
+    truth: tuple[np.ndarray, np.ndarray] | None,
+    path: str | Path,
+) -> Path:
+    """PNG of the variants' keyframe trajectories (final estimates) over ground truth in x-y
+    (left) and their height z over time (right; the truth is at 0). Returns ``path``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax_xy, ax_z) = plt.subplots(1, 2, figsize=(13, 5.5))
+    if truth is not None and len(truth[0]):
+        t, s = truth
+        ax_xy.plot(s[:, 0], s[:, 1], color="0.6", lw=3, label="ground truth")
+        ax_z.plot([t[0], t[-1]], [0.0, 0.0], color="0.6", lw=3, label="ground truth")
+    for j, r in enumerate(results):
+        name = r.metrics.get("variant", "")
+        p = r.keyframe_poses
+        if len(p) == 0:
+            continue
+        style = {"lw": 1.2, "ls": ("-", "--", ":")[j % 3], "label": name}
+        ax_xy.plot(p[:, 0, 3], p[:, 1, 3], **style)
+        ax_z.plot(r.keyframe_times, p[:, 2, 3], **style)
+    ax_xy.set(xlabel="x [m]", ylabel="y [m]", title="keyframes (final estimates)")
+    ax_xy.set_aspect("equal", adjustable="datalim")
+    ax_z.set(xlabel="t [s]", ylabel="z [m]", title="height of the keyframes")
+    for ax in (ax_xy, ax_z):
+        ax.grid(alpha=0.3)
+        ax.legend(loc="best", fontsize=8)
+    fig.suptitle("000 §VI-A ablation: lidar / + GPS / + GPS + loop closure")
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def write_keyframes_tum(path: str | Path, result: Slam3DResult) -> Path:
+    """The keyframes' final estimates as a TUM file (``t x y z qx qy qz qw``)."""
+    from usvdrake.analysis.trajectory_metrics import write_tum, xyz_quat_from_se3
+
+    xyz, q = xyz_quat_from_se3(result.keyframe_poses)
+    write_tum(path, result.keyframe_times, xyz, q)
+    return Path(path)
