@@ -53,7 +53,7 @@ def _odometry_registration() -> RegistrationParams:
 def _loop_registration() -> RegistrationParams:
     # A loop's initial guess carries the whole drift since the old visit: a wide first stage.
     return RegistrationParams(
-        max_correspondence_distances=(2.0, 1.0), source_edge_voxel=0.2, source_planar_voxel=0.4
+        max_correspondence_distances=[2.0, 1.0], source_edge_voxel=0.2, source_planar_voxel=0.4
     )
 
 

@@ -52,7 +52,8 @@ class RegistrationParams:
     """Parameters of :func:`register_scan` (defaults after LOAM / LIO-SAM mapping)."""
 
     k_neighbours: int = 5  # [-] map points per correspondence (LOAM: 5)
-    max_correspondence_distances: tuple[float, ...] = (1.0,)  # [m] radius per stage
+    # [m] radius per stage (a list, not a tuple: Drake's typed YAML reads lists)
+    max_correspondence_distances: list[float] = field(default_factory=lambda: [1.0])
     line_ratio: float = 3.0  # [-] λ1 ≥ this · λ2 for a line (LOAM: 3)
     plane_threshold: float = 0.2  # [m] max distance of the 5 points from their plane
     plane_spread: float = 0.3  # [-] min sqrt(λ2/λ3) of the plane's 5 points: not on one line
