@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from usvdrake.analysis.metrics import slam3d_metrics
+from usvdrake.analysis.metrics import slam3d_counts, slam3d_metrics
 from usvdrake.logs.sensor_stream import SensorMessage, read_ground_truth, read_sensor_stream
 from usvdrake.sensors.geodesy import LocalFrame
 from usvdrake.systems.slam.factor_graph_slam import MIN_CLOUD_POINTS, mount_matrix
@@ -252,28 +252,9 @@ def run_slam3d(
     if truth is not None and len(gt_t):
         metrics |= slam3d_metrics(gt_t, truth[1], online, slam)
     else:
-        metrics |= _counts(slam)
+        metrics |= slam3d_counts(slam)
     kt, poses = slam.trajectory()
     return Slam3DResult(metrics, kt, poses, slam, source, truth, online)
-
-
-def _counts(slam: LidarInertialSlam) -> dict:
-    """Counts and timings of a run without ground truth."""
-    recs = slam.keyframes
-    ms = np.array([r.total_ms for r in recs])
-    c = slam.graph.counts
-    return {
-        "slam_keyframes": len(recs),
-        "slam_sweeps": int(slam.sweeps),
-        "keyframe_ms_median": float(np.median(ms)) if len(ms) else None,
-        "keyframe_ms_p95": float(np.percentile(ms, 95)) if len(ms) else None,
-        "keyframe_ms_max": float(np.max(ms)) if len(ms) else None,
-        "gps_factors": int(c.gps_accepted),
-        "gps_rejected": dict(c.gps_rejected),
-        "loop_candidates": int(c.loop_candidates),
-        "loop_closures": int(c.loop_closures),
-        "degenerate_keyframes": int(sum(r.degenerate for r in recs)),
-    }
 
 
 def variant_config(config: LidarInertialConfig, use_gps: bool, use_loop: bool):

@@ -264,6 +264,32 @@ def truth_at(times: np.ndarray, states: np.ndarray, t: np.ndarray) -> np.ndarray
     )
 
 
+def slam3d_counts(slam) -> dict:
+    """Counts and per-keyframe costs of a 3D SLAM run (no ground truth needed): keyframes,
+    sweeps, keyframe and feature times [ms] (None before the first keyframe), GPS factors and
+    rejections by reason, loop candidates and closures, degenerate keyframes."""
+    recs = slam.keyframes
+    ms = np.array([r.total_ms for r in recs])
+    c = slam.graph.counts
+
+    def stat(f, values):
+        return float(f(values)) if len(values) else None
+
+    return {
+        "slam_keyframes": len(recs),
+        "slam_sweeps": int(slam.sweeps),
+        "keyframe_ms_median": stat(np.median, ms),
+        "keyframe_ms_p95": stat(lambda v: np.percentile(v, 95), ms),
+        "keyframe_ms_max": stat(np.max, ms),
+        "features_ms_median": stat(np.median, [r.features_ms for r in recs]),
+        "gps_factors": int(c.gps_accepted),
+        "gps_rejected": dict(c.gps_rejected),
+        "loop_candidates": int(c.loop_candidates),
+        "loop_closures": int(c.loop_closures),
+        "degenerate_keyframes": int(sum(r.degenerate for r in recs)),
+    }
+
+
 def slam3d_metrics(times: np.ndarray, states: np.ndarray, slam_poses: np.ndarray, slam) -> dict:
     """The 3D factor-graph SLAM (000 §V) against ground truth.
 
@@ -292,9 +318,7 @@ def slam3d_metrics(times: np.ndarray, states: np.ndarray, slam_poses: np.ndarray
     out = {
         "ate_m": float(np.sqrt(np.mean(e**2))) if len(e) else 0.0,
         "slam_final_error_m": float(e[-1]) if len(e) else 0.0,
-        "slam_keyframes": len(recs),
-        "slam_sweeps": int(slam.sweeps),
-    }
+    } | slam3d_counts(slam)
     if not recs:
         return out
     kt = np.array([r.time for r in recs])
@@ -305,8 +329,6 @@ def slam3d_metrics(times: np.ndarray, states: np.ndarray, slam_poses: np.ndarray
     err_final = np.hypot(final[:, 0, 3] - truth[:, 0], final[:, 1, 3] - truth[:, 1])
     p_true = np.column_stack([truth[:, :2], np.zeros(len(kt))])
     ret = (online[-1, :3] - online[0, :3]) - (p_true[-1] - p_true[0])
-    ms = np.array([r.total_ms for r in recs])
-    counts = slam.graph.counts
 
     def segments(flags: np.ndarray) -> tuple[int, float]:
         runs = _runs(flags)
@@ -324,15 +346,6 @@ def slam3d_metrics(times: np.ndarray, states: np.ndarray, slam_poses: np.ndarray
         ),
         "vertical_error_final_m": float(abs(online[-1, 2])),
         "vertical_error_max_m": float(np.max(np.abs(online[:, 2]))),
-        "keyframe_ms_median": float(np.median(ms)),
-        "keyframe_ms_p95": float(np.percentile(ms, 95)),
-        "keyframe_ms_max": float(np.max(ms)),
-        "features_ms_median": float(np.median([r.features_ms for r in recs])),
-        "gps_factors": int(counts.gps_accepted),
-        "gps_rejected": dict(counts.gps_rejected),
-        "loop_candidates": int(counts.loop_candidates),
-        "loop_closures": int(counts.loop_closures),
-        "degenerate_keyframes": int(sum(r.degenerate for r in recs)),
         "degenerate_segments": n_deg,
         "degenerate_max_error_m": deg_err,
         "gps_outage_segments": n_out,

@@ -316,11 +316,17 @@ class FactorGraph3D:
         """Squared Mahalanobis distance [-] of a fix from keyframe k's position estimate:
         r = z − t̂_k, S = R Σ_vv Rᵀ + Σ_gps (Σ_vv: the marginal of the body-frame translation
         part of Pose3's tangent, rotated to the world), d² = rᵀ S⁻¹ r ~ χ²(3)."""
-        T = self._poses[k]
-        R = T[:3, :3]
-        P = R @ self._isam.marginalCovariance(X(k))[3:, 3:] @ R.T
-        r = np.asarray(enu_xyz, dtype=float) - T[:3, 3]
+        return self._innovation(k, enu_xyz, covariance, self.position_covariance(k))
+
+    def _innovation(self, k: int, enu_xyz, covariance, P: np.ndarray) -> float:
+        r = np.asarray(enu_xyz, dtype=float) - self._poses[k][:3, 3]
         return float(r @ np.linalg.solve(P + covariance, r))
+
+    def position_covariance(self, k: int) -> np.ndarray:
+        """Covariance (3 × 3) [m²] of keyframe k's position in the world frame: R Σ_vv Rᵀ of
+        the iSAM2 marginal (Pose3's translation tangent is in the body frame)."""
+        R = self._poses[k][:3, :3]
+        return R @ self._isam.marginalCovariance(X(k))[3:, 3:] @ R.T
 
     def add_gps(
         self, k: int, enu_xyz: np.ndarray, covariance: np.ndarray, valid: bool = True
@@ -357,12 +363,12 @@ class FactorGraph3D:
             c.gps_min_spacing
         ):
             return self._reject("spacing")
-        if c.gps_pose_variance_threshold > 0:
-            R = self._poses[k][:3, :3]
-            P = R @ self._isam.marginalCovariance(X(k))[3:, 3:] @ R.T
-            if max(P[0, 0], P[1, 1]) < c.gps_pose_variance_threshold:
-                return self._reject("confident")
-        if self.gps_innovation(k, z, cov) > self._gate:
+        P = self.position_covariance(k)
+        if c.gps_pose_variance_threshold > 0 and max(P[0, 0], P[1, 1]) < (
+            c.gps_pose_variance_threshold
+        ):
+            return self._reject("confident")
+        if self._innovation(k, z, cov, P) > self._gate:
             return self._reject("gate")
         self._last_gps = p.copy()
         graph = gtsam.NonlinearFactorGraph()
@@ -372,11 +378,14 @@ class FactorGraph3D:
         self.counts.gps_accepted += 1
         return True
 
-    def add_gps_fix(self, k: int, fix: GpsFix, frame: LocalFrame) -> bool:
+    def add_gps_fix(
+        self, k: int, fix: GpsFix, frame: LocalFrame, antenna_height: float = 0.0
+    ) -> bool:
         """:meth:`add_gps` for a geodetic :class:`GpsFix`, converted to ``frame``'s ENU
-        (000 §V-B, ref. [27])."""
+        (000 §V-B, ref. [27]); the antenna ``antenna_height`` [m] above the keyframe's origin
+        (the pose's roll and pitch are small: the offset is taken as vertical)."""
         e, n, u = frame.to_local(fix.latitude, fix.longitude, fix.altitude)
-        return self.add_gps(k, np.array([e, n, u]), fix.covariance_enu, fix.valid)
+        return self.add_gps(k, np.array([e, n, u - antenna_height]), fix.covariance_enu, fix.valid)
 
     # --- loop closure (000 §V-C) -----------------------------------------------------------------
 

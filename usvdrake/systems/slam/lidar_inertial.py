@@ -229,6 +229,7 @@ class LidarInertialSlam:
         self.keyframes: list[KeyframeRecord] = []
         self.sweeps = 0  # lidar sweeps seen
         self.imu_samples = 0
+        self._covariance: tuple[int, np.ndarray] = (-1, np.zeros((3, 3)))  # (keyframe, Σ)
 
     # --- inputs ----------------------------------------------------------------------------------
 
@@ -259,16 +260,15 @@ class LidarInertialSlam:
         t0 = time.perf_counter()
         features = self.features(cloud)
         features_s = time.perf_counter() - t0
-        g, c = self.graph, self.config
+        g = self.graph
         fix = self._fix_near(cloud.time)
         k = g.add_keyframe(T_pred, features)
         gps = False
         if fix is not None and self.frame is not None:
             t1 = time.perf_counter()
-            e, n, u = self.frame.to_local(fix.latitude, fix.longitude, fix.altitude)
-            enu = np.array([e, n, u - c.gps_antenna_height])  # antenna → body origin
-            gps = g.add_gps(k, enu, fix.covariance_enu, fix.valid)
+            gps = g.add_gps_fix(k, fix, self.frame, self.config.gps_antenna_height)
             g.timings[-1].update += time.perf_counter() - t1
+        T_k = g.estimate_of(k)
         timing = g.timings[-1]
         res = g.registrations[-1]
         self.keyframes.append(
@@ -281,18 +281,17 @@ class LidarInertialSlam:
                 gps_valid=fix is not None and bool(fix.valid),
                 n_edge=len(features.edge_points),
                 n_planar=len(features.planar_points),
-                online=np.r_[g.estimate_of(-1)[:3, 3], planar_pose(g.estimate_of(-1))[2]],
+                online=np.r_[T_k[:3, 3], planar_pose(T_k)[2]],
             )
         )
-        self._restart_imu(cloud.time, T_pred)
+        self._restart_imu(cloud.time, T_pred, T_k)
         return True
 
-    def _restart_imu(self, t: float, T_pred: np.ndarray) -> None:
+    def _restart_imu(self, t: float, T_pred: np.ndarray, T_k: np.ndarray) -> None:
         """Restart the IMU from the keyframe's estimate. The velocity is corrected with the lidar
         odometry alone (the registered pose, before GPS and loop factors move the keyframe): a
         GPS fix's metre of noise divided by the 0.7 s between keyframes would be a 1 m/s error
         in the next guess."""
-        T_k = self.graph.estimate_of(-1)
         res = self.graph.registrations[-1]
         T_reg = res.T if res is not None and np.all(np.isfinite(res.T)) else T_pred
         dt = t - self.keyframes[-2].time if len(self.keyframes) > 1 else 0.0
@@ -338,12 +337,14 @@ class LidarInertialSlam:
         if not self.keyframes:
             return np.diag([1e-4, 1e-4, 1e-6])
         k = len(self.keyframes) - 1
-        P = self.graph.marginal_covariance(k)
-        R = self.graph.estimate_of(k)[:3, :3]
-        J = np.zeros((3, 6))
-        J[:2, 3:] = R[:2, :]
-        J[2, :3] = R[2, :]  # world z component of the body rotation vector
-        return J @ P @ J.T
+        if self._covariance[0] != k:  # the graph only changes when a keyframe is added
+            P = self.graph.marginal_covariance(k)
+            R = self.graph.estimate_of(k)[:3, :3]
+            J = np.zeros((3, 6))
+            J[:2, 3:] = R[:2, :]
+            J[2, :3] = R[2, :]  # world z component of the body rotation vector
+            self._covariance = (k, J @ P @ J.T)
+        return self._covariance[1].copy()
 
     def map_points(self) -> np.ndarray:
         """All keyframes' features in the world frame at their current estimates, voxel
