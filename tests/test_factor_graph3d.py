@@ -239,6 +239,30 @@ def test_loop_closure_found_at_start_and_reduces_end_error(ablation, canal):
     assert P[5, 5] < P_lidar[5, 5]
 
 
+def test_attitude_factor_takes_roll_and_pitch_from_gravity_and_leaves_yaw(canal):
+    """AttitudeFactorPose3 with up = R_trueᵀ e_z (world up seen in the body frame): a keyframe
+    guessed 3° / −2° off in roll / pitch is brought to the true tilt; yaw and position stay."""
+    feats = canal[1][0]
+    cfg = FactorGraph3DConfig(prior_rotation_sigma=1.0, use_gps=False, use_loop_closure=False)
+    rx = lambda a: np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])  # noqa: E731
+    ry = lambda a: np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])  # noqa: E731
+    for roll in (0.0, np.deg2rad(2.0)):
+        truth = pose_xy_yaw(3.0, 1.0, 0.7)
+        truth[:3, :3] = truth[:3, :3] @ rx(roll)
+        guess = truth.copy()
+        guess[:3, :3] = truth[:3, :3] @ rx(np.deg2rad(3.0)) @ ry(np.deg2rad(-2.0))
+        g = FactorGraph3D(cfg)
+        g.add_keyframe(guess, feats, up=truth[:3, :3].T @ [0.0, 0.0, 1.0])
+        E = g.estimate_of(0)
+        np.testing.assert_allclose(E[:3, 2], truth[:3, 2], atol=1e-4)  # body z axis: the tilt
+        assert np.arctan2(E[1, 0], E[0, 0]) == pytest.approx(0.7, abs=0.02)  # yaw kept
+        np.testing.assert_allclose(E[:3, 3], truth[:3, 3], atol=1e-9)
+        # without the measurement the loose prior keeps the wrong tilt
+        g = FactorGraph3D(cfg)
+        g.add_keyframe(guess, feats)
+        assert np.linalg.norm(g.estimate_of(0)[:3, 2] - truth[:3, 2]) > 0.05
+
+
 # --- GPS checks ----------------------------------------------------------------------------------
 
 

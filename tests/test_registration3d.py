@@ -18,8 +18,11 @@ from usvdrake.systems.slam.lidar_features import (
 )
 from usvdrake.systems.slam.scan_registration3d import (
     RegistrationParams,
+    _settled,
     build_feature_map,
+    fit_neighbourhoods,
     register_scan,
+    retract,
 )
 
 DATA = Path(__file__).parent / "data" / "lidar3d"
@@ -256,3 +259,55 @@ def test_real_pair_small_gicp(real_result):
     assert pose_error(T_sg, T_fg)[1] > 0.2
     dt, dr = pose_error(res.T, T_sg)
     assert dt < 0.02 and dr < 0.3, (dt, dr)
+
+
+def test_neighbourhood_fits_match_lapack_eigh():
+    """The numba kernel's closed-form fits against numpy's eigh: plane normal = smallest
+    eigenvector, line normals ⊥ the largest one; kept exactly where the tests say so."""
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng(3)
+    # planes (thin slabs), lines (thin rods) and blobs, at random orientations
+    pts = []
+    for _ in range(60):
+        R = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+        scale = [[1.0, 1.0, 0.01], [1.0, 0.02, 0.02], [0.5, 0.5, 0.5]][rng.integers(3)]
+        pts.append(rng.normal(size=(40, 3)) * scale @ R.T + rng.uniform(-30, 30, 3))
+    pts = np.vstack(pts)
+    q = pts[rng.choice(len(pts), 500)] + rng.normal(0, 0.05, (500, 3))
+    tree = cKDTree(pts)
+    prm = RegistrationParams()
+    _, idx = tree.query(q, k=5)
+    nb = pts[idx]
+    dev = nb - nb.mean(axis=1, keepdims=True)
+    lam, vec = np.linalg.eigh(np.einsum("mki,mkj->mij", dev, dev) / 5)
+    for line in (True, False):
+        rows, cen, n1, n2 = fit_neighbourhoods(tree, pts, q, 5, np.inf, line, prm)
+        if line:
+            expected = lam[:, 2] > prm.line_ratio * lam[:, 1]
+        else:
+            normal_dist = np.abs(np.einsum("mki,mi->mk", dev, vec[:, :, 0]))
+            expected = (lam[:, 1] >= prm.plane_spread**2 * lam[:, 2]) & np.all(
+                normal_dist <= prm.plane_threshold, axis=1
+            )
+        np.testing.assert_array_equal(rows, np.flatnonzero(expected))
+        assert 50 < len(rows) < 450
+        np.testing.assert_allclose(cen, nb[rows].mean(axis=1), atol=1e-12)
+        if line:
+            u = vec[rows, :, 2]
+            for n in (n1, n2):
+                np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1.0, atol=1e-9)
+                assert np.abs(np.einsum("mi,mi->m", n, u)).max() < 1e-6
+            assert np.abs(np.einsum("mi,mi->m", n1, n2)).max() < 1e-9
+        else:
+            np.testing.assert_allclose(np.abs(np.einsum("mi,mi->m", n1, vec[rows, :, 0])), 1.0,
+                                       atol=1e-6)  # fmt: skip
+
+
+def test_settled_stops_a_two_cycle_but_not_progress():
+    prm = RegistrationParams()
+    A = np.eye(4)
+    B = retract(A, np.r_[0.0, 0.0, 1e-4, 1e-3, 0.0, 0.0])  # 1 mm, 0.006°: above tolerance
+    assert not _settled(B, [A], prm)  # moved: not converged
+    assert _settled(A, [A, B], prm)  # back where it was two iterations ago: a cycle
+    assert _settled(retract(A, np.full(6, 1e-5)), [A], prm)  # a tiny step: LOAM's test

@@ -12,6 +12,11 @@ local ENU frame of :class:`usvdrake.sensors.geodesy.LocalFrame`), and three fact
   n = 25 keyframes, placed in the world frame with their *current* estimates, starting from the
   caller's guess (000: IMU integration since the last keyframe). The result T_w,k gives the
   ``BetweenFactor`` X(k−1)⁻¹X(k) = T̂_w,k−1⁻¹ T_w,k with the noise of :func:`lidar_noise_model`.
+* **Attitude factor** (our addition, as LIO-SAM blends the IMU's roll and pitch into each
+  match): the gravity direction measured by the AHRS in the body frame, b, must be the world's
+  up, R_k b = e_z (gtsam ``AttitudeFactorPose3``, 2 residuals: roll and pitch, yaw free).
+  Roll and pitch are absolutely observable from gravity; without it they drift through the
+  submap and a tilt turns forward motion into climbing (see ``attitude_sigma``).
 * **GPS factor** (000 §V-B): a fix converted to ENU (000 ref. [27]; here pyproj's topocentric
   conversion) becomes a ``GPSFactor`` on the keyframe it is associated with — only after the
   validity, covariance and χ² innovation checks of :meth:`FactorGraph3D.add_gps`.
@@ -42,6 +47,8 @@ from usvdrake.systems.slam.scan_registration3d import (
     RegistrationResult,
     build_feature_map,
     register_scan,
+    transform_points,
+    voxel_downsample,
 )
 
 
@@ -74,6 +81,12 @@ class FactorGraph3DConfig:
     # Prior on the first keyframe (pins the gauge; loosen it when GPS defines the ENU frame)
     prior_rotation_sigma: float = 1e-3  # [rad]
     prior_translation_sigma: float = 1e-2  # [m]
+    # Attitude factor: the AHRS's gravity direction on every keyframe (roll, pitch). The lidar
+    # alone leaves tilt to drift through the submap (each match levels itself to the previous,
+    # slightly tilted keyframes): on canal_survey lidar-only pitch reached −3° in 120 s and,
+    # at 1 m per keyframe, lifted the estimate 2.6 cm per keyframe. 3DM-GX5-25: ±0.25°
+    # dynamic roll/pitch. ≤ 0: no attitude factor.
+    attitude_sigma: float = float(np.deg2rad(0.25))  # [rad]
     # GPS factor (000 §V-B)
     use_gps: bool = True  # [-] False: GPS fixes are counted as rejected ("disabled")
     # [m] reject a fix whose largest horizontal σ exceeds this (LIO-SAM gpsCovThreshold); the
@@ -218,9 +231,11 @@ class FactorGraph3D:
             np.r_[np.full(3, c.prior_rotation_sigma), np.full(3, c.prior_translation_sigma)]
         )
         self._gate = float(chi2.ppf(c.gps_gate_probability, 3))
+        self._attitude_noise = gtsam.noiseModel.Isotropic.Sigma(2, max(c.attitude_sigma, 1e-9))
         self._edges: list[np.ndarray] = []  # per keyframe F^e (N × 3) [m], sensor frame
         self._planes: list[np.ndarray] = []  # per keyframe F^p
         self._poses: list[np.ndarray] = []  # current estimates T_world_keyframe (4 × 4)
+        self._world_cache: dict[int, tuple] = {}  # i → (pose, edges, planes) in the world
         self._last_loop = -(10**9)
         self._last_gps: np.ndarray | None = None  # position of the last keyframe with GPS
         self.counts = FactorGraphCounts()
@@ -230,12 +245,25 @@ class FactorGraph3D:
 
     # --- keyframes and lidar odometry (000 §V-A) -------------------------------------------------
 
+    def _world_clouds(self, i: int) -> tuple[np.ndarray, np.ndarray]:
+        """Keyframe i's (edges, planes) in the world frame at its current estimate, cached
+        while the estimate is unchanged (LIO-SAM's ``laserCloudMapContainer``): iSAM2 moves
+        only the poses its update touched, so most of a submap is reused."""
+        T = self._poses[i]
+        hit = self._world_cache.get(i)
+        if hit is not None and np.array_equal(hit[0], T):
+            return hit[1], hit[2]
+        e, p = transform_points(T, self._edges[i]), transform_points(T, self._planes[i])
+        self._world_cache[i] = (T, e, p)
+        return e, p
+
     def _submap(self, indices: range):
         c = self.config
+        clouds = [self._world_clouds(i) for i in indices]
         return build_feature_map(
-            [self._edges[i] for i in indices],
-            [self._planes[i] for i in indices],
-            [self._poses[i] for i in indices],
+            [e for e, _ in clouds],
+            [p for _, p in clouds],
+            None,
             c.submap_edge_voxel,
             c.submap_planar_voxel,
         )
@@ -255,6 +283,7 @@ class FactorGraph3D:
         T_guess: np.ndarray,
         features: LidarFeatures,
         gps: tuple[np.ndarray, np.ndarray] | None = None,
+        up: np.ndarray | None = None,
     ) -> int:
         """Add keyframe k with its features (sensor frame) and return k.
 
@@ -262,7 +291,8 @@ class FactorGraph3D:
         keyframe). The first keyframe gets a prior at T_guess; later ones an odometry factor from
         registering against the previous ``submap_keyframes`` keyframes. gps: optional
         (ENU position (3,) [m], covariance (3 × 3) [m²]) added with :meth:`add_gps`; then
-        :meth:`close_loops` runs when enabled."""
+        :meth:`close_loops` runs when enabled. up: the world's up direction measured in the
+        keyframe's frame (3,) (AHRS gravity), for the attitude factor; None: none."""
         c = self.config
         k = len(self._poses)
         T_guess = np.asarray(T_guess, dtype=float)
@@ -270,6 +300,13 @@ class FactorGraph3D:
         graph = gtsam.NonlinearFactorGraph()
         values = gtsam.Values()
         t0 = time.perf_counter()
+        # kept down-sampled as registered (LIO-SAM stores its keyframes' "DS" clouds): the
+        # submaps merge 25 of them per keyframe (register_scan's own down-sampling of them is
+        # then a no-op: each point already has a voxel to itself)
+        r = c.registration
+        edges = voxel_downsample(features.edge_points, r.source_edge_voxel)
+        planes = voxel_downsample(features.planar_points, r.source_planar_voxel)
+        features = LidarFeatures(edge_points=edges, planar_points=planes)
         if k == 0:
             T_k, res = T_guess, None
             graph.add(gtsam.PriorFactorPose3(X(0), gtsam.Pose3(T_k), self._prior_noise))
@@ -281,9 +318,16 @@ class FactorGraph3D:
             noise = self._noise(res, c.registration)
             graph.add(gtsam.BetweenFactorPose3(X(k - 1), X(k), gtsam.Pose3(delta), noise))
         timing.registration = time.perf_counter() - t0
+        if up is not None and c.attitude_sigma > 0:
+            graph.add(
+                gtsam.AttitudeFactorPose3(
+                    X(k), gtsam.Unit3(np.array([0.0, 0.0, 1.0])), self._attitude_noise,
+                    gtsam.Unit3(np.asarray(up, dtype=float)),
+                )
+            )  # fmt: skip
         values.insert(X(k), gtsam.Pose3(T_k))
-        self._edges.append(np.asarray(features.edge_points, dtype=float).reshape(-1, 3))
-        self._planes.append(np.asarray(features.planar_points, dtype=float).reshape(-1, 3))
+        self._edges.append(edges)
+        self._planes.append(planes)
         self._poses.append(T_k)
         self.registrations.append(res)
         t0 = time.perf_counter()
@@ -449,12 +493,14 @@ class FactorGraph3D:
 
     @property
     def edge_clouds(self) -> list[np.ndarray]:
-        """Per keyframe its edge features F^e (N × 3) [m], keyframe frame (read only)."""
+        """Per keyframe its edge features F^e (N × 3) [m], keyframe frame, down-sampled by
+        ``registration.source_edge_voxel`` (read only)."""
         return self._edges
 
     @property
     def planar_clouds(self) -> list[np.ndarray]:
-        """Per keyframe its planar features F^p (N × 3) [m], keyframe frame (read only)."""
+        """Per keyframe its planar features F^p (N × 3) [m], keyframe frame, down-sampled by
+        ``registration.source_planar_voxel`` (read only)."""
         return self._planes
 
     def marginal_covariance(self, k: int) -> np.ndarray:

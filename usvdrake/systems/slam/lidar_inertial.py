@@ -120,6 +120,7 @@ class ImuPropagator:
         self.v = np.zeros(3)  # world-frame velocity [m/s]
         self.t = 0.0  # [s] time of T, v
         self.omega = np.zeros(3)  # [rad/s] last gyro sample, body frame
+        self.up: np.ndarray | None = None  # world up in the body frame, last AHRS sample
         self.steps = 0  # samples integrated since the last reset
 
     def reset(self, T: np.ndarray, v_body: np.ndarray, t: float) -> None:
@@ -151,6 +152,7 @@ class ImuPropagator:
         self.T[:3, :3] = level_rotation(R @ so3_exp(w * dt), sample.orientation)
         self.t = float(sample.time)
         self.omega = w
+        self.up = quaternion_matrix(sample.orientation)[2, :].copy()  # R_ahrsᵀ e_z
         self.steps += 1
 
     def predict(self, t: float) -> np.ndarray:
@@ -262,7 +264,7 @@ class LidarInertialSlam:
         features_s = time.perf_counter() - t0
         g = self.graph
         fix = self._fix_near(cloud.time)
-        k = g.add_keyframe(T_pred, features)
+        k = g.add_keyframe(T_pred, features, up=self.imu.up)
         gps = False
         if fix is not None and self.frame is not None:
             t1 = time.perf_counter()
