@@ -315,3 +315,23 @@ def test_gps_factors_spaced_and_only_while_uncertain(canal):
     )
     g, _ = drive(canal, confident, n=5)
     assert g.counts.gps_accepted == 0 and g.counts.gps_rejected == {"confident": 5}
+
+
+def test_correlated_gps_fixes_count_as_their_effective_sample_size(canal):
+    """Two fixes Δt = 3 s apart with a 30 s error correlation time: the second counts with its
+    variance × (1 + ρ)/(1 − ρ), ρ = e^{−0.1} (≈ 20 ×); without times both count fully."""
+    feats = canal[1][0]
+    sigma = 2.0
+    cov = np.diag([sigma**2, sigma**2, 9.0])
+    rho = np.exp(-3.0 / 30.0)
+    inflation = (1 + rho) / (1 - rho)
+    for times, expected in (((0.0, 3.0), 1 / (1 + 1 / inflation)), ((None, None), 0.5)):
+        cfg = FactorGraph3DConfig(
+            prior_translation_sigma=1e3, gps_min_spacing=0.0, use_loop_closure=False
+        )
+        g = FactorGraph3D(cfg)
+        g.add_keyframe(np.eye(4), feats)
+        for t in times:
+            assert g.add_gps(0, np.zeros(3), cov, time=t)
+        var = g.position_covariance(0)[0, 0] / sigma**2
+        assert var == pytest.approx(expected, rel=1e-3), (times, var)
