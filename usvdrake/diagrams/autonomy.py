@@ -88,7 +88,7 @@ def _add_factor_graph_slam(builder: DiagramBuilder, scenario: Scenario, world_da
     )
     for port in ("lidar_points", "imu", "gps"):
         builder.ExportInput(slam.GetInputPort(port), port)
-    for port in ("slam_pose", "slam_covariance", "slam_state", "slam_pose3d", "slam_points"):
+    for port in ("slam_pose", "slam_covariance", "slam_state", "slam_pose3d", "slam_map3d"):
         builder.ExportOutput(slam.GetOutputPort(port), port)
     return slam
 

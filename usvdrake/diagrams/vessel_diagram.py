@@ -119,6 +119,11 @@ def build_vessel_diagram(
 
             slam_map = builder.AddNamedSystem("slam_map_visualizer", OccupancyVisualizer(meshcat))
             builder.Connect(autonomy.GetOutputPort("slam_map"), slam_map.GetInputPort("map"))
+        if autonomy.HasOutputPort("slam_map3d"):
+            from usvdrake.viz.point_map_visualizer import KeyframeMapVisualizer
+
+            map3d = builder.AddNamedSystem("slam_map3d_visualizer", KeyframeMapVisualizer(meshcat))
+            builder.Connect(autonomy.GetOutputPort("slam_map3d"), map3d.GetInputPort("map"))
         if autonomy.HasOutputPort("path"):
             from usvdrake.viz.exploration_visualizer import ExplorationVisualizer
 

@@ -516,6 +516,10 @@ class FactorGraph3D:
         """Current estimates T_world_keyframe (4 × 4 each), one per keyframe."""
         return [T.copy() for T in self._poses]
 
+    def poses(self) -> np.ndarray:
+        """Current estimates T_world_keyframe as one array (n × 4 × 4), a copy."""
+        return self._poses.copy()
+
     def estimate_of(self, k: int) -> np.ndarray:
         """Current estimate T_world_keyframe (4 × 4) of keyframe k (negative: from the end)."""
         return self._poses[k].copy()

@@ -7,6 +7,7 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 from usvdrake.sensors.geodesy import LocalFrame
 from usvdrake.sensors.messages import GpsFix, ImuSample, PointCloud
 from usvdrake.systems.slam.lidar_inertial import (
+    KeyframeMap,
     LidarInertialConfig,
     LidarInertialSlam,
     planar_pose,
@@ -40,14 +41,15 @@ class FactorGraphSlam(LeafSystem):
         - slam_covariance
         - slam_state
         - slam_pose3d
-        - slam_points
+        - slam_map3d
 
     ``slam_pose`` = [x y ψ] (what the controllers use, 000 §V) and ``slam_state`` = [x y ψ u v r]
     (body velocities from the IMU propagation): the last keyframe's estimate propagated by the
     IMU to now. ``slam_covariance`` (9, row-major 3 × 3) of [x y ψ] at the last keyframe (iSAM2
     marginal). ``slam_pose3d`` = [x y z roll pitch yaw] [m, rad] of the full state.
-    ``slam_points``: the map (N × 3 world points of every keyframe's features at the current
-    estimates, voxel-filtered), computed when read.
+    ``slam_map3d``: the map, a :class:`KeyframeMap` (every keyframe's features, voxel-filtered,
+    with its current estimate; drawn by :class:`usvdrake.viz.point_map_visualizer.
+    KeyframeMapVisualizer`).
 
     One periodic update at the IMU's rate, ``TICK_DELAY`` after each sample, takes whatever is
     new on the three inputs (by message time): IMU first, then GPS, then a lidar sweep — so a
@@ -89,9 +91,9 @@ class FactorGraphSlam(LeafSystem):
             "slam_pose3d", 6, self._calc_pose3d, prerequisites_of_calc=deps
         )
         self.DeclareAbstractOutputPort(
-            "slam_points",
-            lambda: AbstractValue.Make(np.zeros((0, 3))),
-            self._calc_points,
+            "slam_map3d",
+            lambda: AbstractValue.Make(KeyframeMap()),
+            self._calc_map,
             prerequisites_of_calc=deps,
         )
 
@@ -132,5 +134,5 @@ class FactorGraphSlam(LeafSystem):
         yaw = np.arctan2(R[1, 0], R[0, 0])
         output.SetFromVector(np.r_[T[:3, 3], roll, pitch, yaw])
 
-    def _calc_points(self, context, value):
-        value.set_value(self.slam(context).map_points())
+    def _calc_map(self, context, value):
+        value.set_value(self.slam(context).keyframe_map())

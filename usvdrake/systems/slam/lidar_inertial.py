@@ -194,13 +194,39 @@ class KeyframeRecord:
 
     time: float  # [s] sweep end
     features_ms: float  # [ms] de-skew + feature extraction
-    total_ms: float  # [ms] features + registration + iSAM2 update(s) + loop search
+    total_ms: float  # [ms] features + registration + iSAM2 update(s) (with the GPS factor)
+    loop_ms: float  # [ms] loop search, match and its extra updates
     degenerate: bool  # the odometry registration found a degenerate direction
     gps: bool  # a GPS factor was added
     gps_valid: bool  # a valid fix was there to try (False: outage, e.g. under a bridge)
     n_edge: int
     n_planar: int
     online: np.ndarray  # [x y z ψ] estimate right after the keyframe was added (online)
+
+
+class KeyframeMap:
+    """The SLAM's map as keyframes: ``poses`` (n × 4 × 4) T_world_keyframe at the current
+    estimates and ``clouds``, per keyframe its features (edges and planes) in its own frame,
+    voxel-filtered for display. The clouds never change once made, so copies share them (Drake
+    copies output values): a copy costs the poses only, and a drawing that keeps one geometry per
+    keyframe only moves it when a loop or GPS factor moves the keyframe."""
+
+    def __init__(self, poses: np.ndarray | None = None, clouds: list | None = None):
+        self.poses = np.zeros((0, 4, 4)) if poses is None else np.asarray(poses, dtype=float)
+        self.clouds: list[np.ndarray] = [] if clouds is None else clouds
+
+    def __len__(self) -> int:
+        return len(self.poses)
+
+    def points(self, voxel: float = 0.0) -> np.ndarray:
+        """All keyframes' points in the world frame (N × 3) [m], voxel-filtered (voxel > 0)."""
+        if not len(self):
+            return np.zeros((0, 3))
+        clouds = [transform_points(T, c) for T, c in zip(self.poses, self.clouds, strict=False)]
+        return voxel_downsample(np.vstack(clouds), voxel)
+
+    def __deepcopy__(self, memo) -> "KeyframeMap":
+        return KeyframeMap(self.poses.copy(), self.clouds)
 
 
 class LidarInertialSlam:
@@ -232,6 +258,7 @@ class LidarInertialSlam:
         self.sweeps = 0  # lidar sweeps seen
         self.imu_samples = 0
         self._covariance: tuple[int, np.ndarray] = (-1, np.zeros((3, 3)))  # (keyframe, Σ)
+        self._map_clouds: list[np.ndarray] = []  # per keyframe its display cloud (map_voxel)
 
     # --- inputs ----------------------------------------------------------------------------------
 
@@ -265,6 +292,11 @@ class LidarInertialSlam:
         g = self.graph
         fix = self._fix_near(cloud.time)
         k = g.add_keyframe(T_pred, features, up=self.imu.up)
+        self._map_clouds.append(
+            voxel_downsample(
+                np.vstack([g.edge_clouds[k], g.planar_clouds[k]]), self.config.map_voxel
+            )
+        )
         gps = False
         if fix is not None and self.frame is not None:
             t1 = time.perf_counter()
@@ -277,7 +309,8 @@ class LidarInertialSlam:
             KeyframeRecord(
                 time=float(cloud.time),
                 features_ms=1e3 * features_s,
-                total_ms=1e3 * (features_s + timing.total),
+                total_ms=1e3 * (features_s + timing.registration + timing.update),
+                loop_ms=1e3 * timing.loop,
                 degenerate=bool(res.degenerate) if res is not None else False,
                 gps=gps,
                 gps_valid=fix is not None and bool(fix.valid),
@@ -348,18 +381,14 @@ class LidarInertialSlam:
             self._covariance = (k, J @ P @ J.T)
         return self._covariance[1].copy()
 
+    def keyframe_map(self) -> KeyframeMap:
+        """The map: every keyframe's features (``map_voxel``) with its current estimate."""
+        return KeyframeMap(self.graph.poses(), self._map_clouds)
+
     def map_points(self) -> np.ndarray:
         """All keyframes' features in the world frame at their current estimates, voxel
         down-sampled (``map_voxel``)."""
-        g = self.graph
-        poses = g.estimate()
-        if not poses:
-            return np.zeros((0, 3))
-        clouds = [
-            transform_points(T, np.vstack([e, p]))
-            for T, e, p in zip(poses, g.edge_clouds, g.planar_clouds, strict=True)
-        ]
-        return voxel_downsample(np.vstack(clouds), self.config.map_voxel)
+        return self.keyframe_map().points(self.config.map_voxel)
 
     def trajectory(self) -> tuple[np.ndarray, np.ndarray]:
         """(keyframe times (n,), current keyframe estimates (n × 4 × 4))."""
