@@ -78,6 +78,7 @@ def test_ntnu_round_geometry():
         (GOOD + "sensors: {gps: {datum: mars}}\n", "sensors.gps.datum", "one of"),
         (GOOD.replace("[[10.0, 0.0]]", "[[30.0, 7.5]]"), "mission.waypoints[0]", "free water"),
         (GOOD + "initial_state: [30, -20, 0, 0, 0, 0]\n", "initial_state", "free water"),
+        (GOOD + "estimator: slam\n", "estimator", "only with slam.method factor_graph"),
         (
             GOOD.replace("[[10.0, 0.0]]", "[[10.0, 0.0], [65.0, 30.0]]"),
             "mission.waypoints[1]",

@@ -31,7 +31,7 @@ from usvdrake.vessel import VESSEL_DIR, available_vessels
 
 SCENARIO_DIR = Path(__file__).parent / "scenarios"
 DEFAULT_SCENARIO = "canal_demo"
-ESTIMATORS = ("oracle", "nmhe", "observer")
+ESTIMATORS = ("oracle", "nmhe", "observer", "slam")
 CONTROLLERS = ("baseline", "nmpc", "explore", "taxi")
 SLAM_METHODS = ("none", "graph", "hector", "known_poses", "factor_graph")
 
@@ -245,7 +245,8 @@ class Scenario:
     # only; the autonomy's NMPC/NMHE/controllers keep the vessel file's nominal ξ)
     model_error: list[float] = field(default_factory=lambda: [1.0] * 6)
     # "oracle": the autonomy reads ground truth; "nmhe": 000's NMHE on the pose sensor and the
-    # measured thrust (needs "pose" in sensors.enabled)
+    # measured thrust (needs "pose" in sensors.enabled); "slam": the controllers fly on the 3D
+    # SLAM's [x y ψ u v r] (000 §V; needs slam.method factor_graph)
     estimator: str = "oracle"
     nmhe: NmheConfig = field(default_factory=NmheConfig)
     # "baseline": LOS guidance + PD + thrust allocation over the waypoints; "nmpc": the NMPC of
@@ -429,6 +430,13 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
             "sensors.enabled",
             "'lidar2d' in the list (the SLAM reads it)",
             repr(s.sensors.enabled),
+        )
+    if s.estimator == "slam" and (s.slam.method != "factor_graph" or s.controller == "explore"):
+        raise ConfigError(
+            file,
+            "estimator",
+            "'slam' only with slam.method factor_graph and a waypoint controller",
+            f"slam with slam.method {s.slam.method!r}, controller {s.controller!r}",
         )
     if s.estimator == "nmhe" and "pose" not in s.sensors.enabled:
         raise ConfigError(

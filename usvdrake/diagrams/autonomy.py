@@ -262,6 +262,8 @@ def make_autonomy(
         builder.ExportOutput(nmhe.GetOutputPort("nmhe_solve_ms"), "nmhe_solve_ms")
         estimate = nmhe.GetOutputPort("state_estimate")
         nmhe_force = nmhe.GetOutputPort("tau_env_estimate")
+    elif scenario.estimator == "slam":  # 000 §V: the controllers use the SLAM's [x y ψ]
+        estimate = _add_slam(builder, scenario, world).GetOutputPort("slam_state")
     else:
         estimate = _add_oracle(builder).get_output_port()
 
@@ -308,7 +310,7 @@ def make_autonomy(
         builder.ExportOutput(controller.GetOutputPort("tau_desired"), "tau_desired")
         builder.ExportOutput(allocation.GetOutputPort("tau_achieved"), "tau_achieved")
     builder.ExportOutput(estimate, "state_estimate")
-    if scenario.slam.method != "none":
+    if scenario.slam.method != "none" and scenario.estimator != "slam":
         _add_slam(builder, scenario, world)
     autonomy = builder.Build()
     autonomy.set_name("autonomy")
