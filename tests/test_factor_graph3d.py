@@ -335,3 +335,37 @@ def test_correlated_gps_fixes_count_as_their_effective_sample_size(canal):
             assert g.add_gps(0, np.zeros(3), cov, time=t)
         var = g.position_covariance(0)[0, 0] / sigma**2
         assert var == pytest.approx(expected, rel=1e-3), (times, var)
+
+
+def test_water_level_factor_holds_z_and_nothing_else(canal):
+    """The water-level factor's residual and Jacobian against finite differences, and on a
+    keyframe guessed 0.7 m high with a loose prior it brings z to the level, x, y, ψ kept."""
+    import gtsam
+    from gtsam.symbol_shorthand import X
+
+    from usvdrake.systems.slam.factor_graph3d import water_level_factor
+
+    f = water_level_factor(X(0), -0.4, 0.05)
+    T = gtsam.Pose3(gtsam.Rot3.RzRyRx(0.1, -0.05, 0.8), np.array([1.0, 2.0, 0.3]))
+    v = gtsam.Values()
+    v.insert(X(0), T)
+    assert f.unwhitenedError(v)[0] == pytest.approx(0.7)
+    J = f.linearize(v).jacobian()[0] * 0.05  # whitened → unwhitened
+    for i in range(6):
+        d = np.zeros(6)
+        d[i] = 1e-6
+        w = gtsam.Values()
+        w.insert(X(0), T.retract(d))
+        assert (f.unwhitenedError(w)[0] - 0.7) / 1e-6 == pytest.approx(J[0, i], abs=1e-5)
+    cfg = FactorGraph3DConfig(
+        prior_translation_sigma=10.0, water_level=-0.4, water_level_sigma=0.05,
+        use_gps=False, use_loop_closure=False,
+    )  # fmt: skip
+    g = FactorGraph3D(cfg)
+    guess = pose_xy_yaw(3.0, 1.0, 0.7)
+    guess[2, 3] = 0.3
+    g.add_keyframe(guess, canal[1][0])
+    E = g.estimate_of(0)
+    assert E[2, 3] == pytest.approx(-0.4, abs=1e-3)
+    np.testing.assert_allclose(E[:2, 3], [3.0, 1.0], atol=1e-6)
+    assert np.arctan2(E[1, 0], E[0, 0]) == pytest.approx(0.7, abs=1e-9)

@@ -84,13 +84,15 @@ def test_offline_run_reproduces_the_live_run(survey, offline):
     assert m["gps_factors"] == live.metrics["gps_factors"]
 
 
-def test_ablation_has_the_three_variants(variants, tmp_path):
+def test_ablation_has_the_three_variants_and_the_water_level_graph(variants, tmp_path):
     rows = ablation_rows(variants)
-    assert [r["variant"] for r in rows] == ["lidar", "lidar+gps", "lidar+gps+loop"]
-    assert [(r["use_gps"], r["use_loop_closure"]) for r in rows] == [
-        (False, False),
-        (True, False),
-        (True, True),
+    names = ["lidar", "lidar+gps", "lidar+gps+loop", "lidar+gps+loop+water"]
+    assert [r["variant"] for r in rows] == names
+    assert [(r["use_gps"], r["use_loop_closure"], r["water_level"]) for r in rows] == [
+        (False, False, False),
+        (True, False, False),
+        (True, True, False),
+        (True, True, True),  # canal_survey's configured graph
     ]
     assert rows[0]["gps_factors"] == 0 and rows[1]["gps_factors"] >= 1
     assert rows[0]["loop_closures"] == 0 and rows[1]["loop_closures"] == 0
@@ -100,7 +102,7 @@ def test_ablation_has_the_three_variants(variants, tmp_path):
         assert r["ate_m"] < 0.5
     json.dumps(rows)  # plain values
     table = format_table(rows)
-    assert len(table.splitlines()) == 5 and "lidar+gps+loop" in table
+    assert len(table.splitlines()) == 6 and "lidar+gps+loop+water" in table
     png = plot_ablation(variants, variants[0].truth, tmp_path / "ablation.png")
     assert png.stat().st_size > 10_000
 
