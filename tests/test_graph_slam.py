@@ -127,3 +127,27 @@ def test_final_trajectory_has_every_scan_and_copies_keep_their_own(noisy_loop):
     b._record(2e6)
     assert a.final_trajectory()[0][-1] == 1e6 and b.final_trajectory()[0][-1] == 2e6
     assert len(slam.final_trajectory()[0]) == len(est)
+
+
+def test_final_ate_scores_the_body_not_the_lidar():
+    """The backend's final trajectory is the lidar's (0.5 m ahead of the body on lake_survey);
+    with the mount, ``ate_final_m`` scores the body as ``ate_m`` does: a perfect SLAM is 0 m,
+    not the mount's lever arm."""
+    from usvdrake.analysis.metrics import slam_metrics
+
+    t = np.arange(0.0, 20.0, 0.1)
+    truth = np.column_stack([np.cos(0.1 * t), np.sin(0.1 * t), 0.1 * t + np.pi / 2])
+    mount = np.array([0.5, 0.1, 0.2])  # x, y, yaw of the lidar in the body frame
+    lidar = np.array([compose(p, mount) for p in truth])
+
+    class Backend:  # a perfect SLAM: the true lidar poses at the scan times
+        def final_trajectory(self):
+            return t, lidar
+
+    states = np.column_stack([truth, np.zeros((len(t), 3))])
+    m = slam_metrics(t, states, truth, Backend(), mount=mount)
+    assert m["ate_m"] < 1e-12 and m["ate_final_m"] < 1e-12
+    # without the mount the lever arm is all the error: the symptom on lake_survey
+    assert slam_metrics(t, states, truth, Backend())["ate_final_m"] == pytest.approx(
+        np.hypot(0.5, 0.1)
+    )

@@ -315,7 +315,9 @@ def run_mission(
     if autonomy.HasSubsystemNamed("lidar_slam_2d"):
         slam_sys = autonomy.GetSubsystemByName("lidar_slam_2d")
         slam = slam_sys.slam(slam_sys.GetMyContextFromRoot(context))
-        metrics.update(slam_metrics(times, states, logs["slam_pose"].data().T, slam))
+        metrics.update(
+            slam_metrics(times, states, logs["slam_pose"].data().T, slam, mount=slam_sys.mount)
+        )
 
     if autonomy.HasSubsystemNamed("factor_graph_slam"):
         slam_sys = autonomy.GetSubsystemByName("factor_graph_slam")

@@ -110,10 +110,16 @@ def estimation_metrics(
     return out
 
 
-def slam_metrics(times: np.ndarray, states: np.ndarray, slam_poses: np.ndarray, slam) -> dict:
+def slam_metrics(
+    times: np.ndarray, states: np.ndarray, slam_poses: np.ndarray, slam, mount=None
+) -> dict:
     """SLAM pose against ground truth at the logged times (the SLAM starts at the true initial
     pose, so no alignment): ATE RMSE [m] (Sturm et al. 2012, translational), heading RMSE, the
-    final error, node and constraint counts (002 reports 638 and 1952) and per-scan times."""
+    final error, node and constraint counts (002 reports 638 and 1952) and per-scan times.
+
+    ``slam_poses`` are the vessel's (body) poses; the backend's ``final_trajectory`` gives the
+    lidar's, so ``mount`` = [x y ψ] of the lidar in the body frame takes them back to the body
+    before they are scored (None: the lidar at the body origin)."""
     keep = times >= 1.0
     e = np.hypot(slam_poses[keep, 0] - states[keep, 0], slam_poses[keep, 1] - states[keep, 1])
     h = np.angle(np.exp(1j * (slam_poses[keep, 2] - states[keep, 2])))
@@ -136,6 +142,10 @@ def slam_metrics(times: np.ndarray, states: np.ndarray, slam_poses: np.ndarray, 
     if hasattr(slam, "final_trajectory"):
         # the final estimate (poses re-expressed from their optimised nodes), at the logged times
         t_fin, p_fin = slam.final_trajectory()
+        if len(t_fin) and mount is not None:
+            from usvdrake.systems.slam.graph_slam import body_pose
+
+            p_fin = np.array([body_pose(p, mount) for p in p_fin])
         if len(t_fin):
             idx = np.clip(np.searchsorted(t_fin, times[keep], side="right") - 1, 0, len(t_fin) - 1)
             near = np.abs(t_fin[idx] - times[keep]) < 0.1

@@ -72,6 +72,12 @@ def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], a[2] + b[2]])
 
 
+def body_pose(sensor_pose: np.ndarray, mount: np.ndarray) -> np.ndarray:
+    """The vessel's pose (x, y, θ) from its sensor's, the sensor mounted at ``mount`` = (x, y,
+    θ) in the body frame: sensor ⊕ mount⁻¹."""
+    return compose(np.asarray(sensor_pose, float), between(np.asarray(mount, float), np.zeros(3)))
+
+
 def between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """a⁻¹ ⊕ b: b expressed in a's frame."""
     c, s = np.cos(a[2]), np.sin(a[2])

@@ -6,7 +6,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from usvdrake.sensors.messages import LaserScan
-from usvdrake.systems.slam.graph_slam import GraphSlam, GraphSlamConfig, between, compose
+from usvdrake.systems.slam.graph_slam import GraphSlam, GraphSlamConfig, body_pose, compose
 from usvdrake.systems.slam.hector import HectorConfig, make_hector
 from usvdrake.worlds.world import OccupancyGrid
 
@@ -58,6 +58,11 @@ class LidarSlam2D(LeafSystem):
             prerequisites_of_calc=deps,
         )
 
+    @property
+    def mount(self) -> np.ndarray:
+        """[x y ψ] of the lidar in the body frame: the backend's poses are the lidar's."""
+        return self._mount.copy()
+
     def slam(self, context):
         return context.get_abstract_state(self._slam).get_value()
 
@@ -75,9 +80,7 @@ class LidarSlam2D(LeafSystem):
         state.get_mutable_abstract_state(self._slam).get_value().background()
 
     def _calc_pose(self, context, output):
-        output.SetFromVector(
-            compose(self.slam(context).sensor_pose, between(self._mount, np.zeros(3)))
-        )
+        output.SetFromVector(body_pose(self.slam(context).sensor_pose, self._mount))
 
     def _calc_cov(self, context, output):
         output.SetFromVector(np.asarray(self.slam(context).pose_covariance(), float).ravel())
