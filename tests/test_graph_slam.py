@@ -151,3 +151,85 @@ def test_final_ate_scores_the_body_not_the_lidar():
     assert slam_metrics(t, states, truth, Backend())["ate_final_m"] == pytest.approx(
         np.hypot(0.5, 0.1)
     )
+
+
+def test_deskew_scan_undoes_the_sweeps_own_motion():
+    """A Hokuyo sweep cast with its own motion (turning at 0.5 rad/s, 1.5 m/s ahead, 0.2 m/s
+    sideways), de-skewed with that twist, lies on the motion-free sweep from its end pose:
+    each return's distance to the polyline of the motion-free returns (the surfaces)."""
+    from scipy.spatial import cKDTree
+
+    from usvdrake.sensors.lidar2d import Lidar2D
+    from usvdrake.systems.slam.graph_slam import deskew_scan
+
+    preset = preset_by_name("hokuyo_utm30lx")
+    cfg = LidarConfig(preset=preset.name, mount=[0, 0, 0.5, 0], noise=False)
+    moving = LidarModel(preset, cfg, POND.scene, 1, 20)
+    still = LidarModel(preset, LidarConfig(**{**cfg.__dict__, "motion": False}), POND.scene, 1, 20)
+    q = np.array([3.0, -4.0, 0.3, 1.5, 0.2, 0.5])
+    a = moving.layout.azimuths
+    r_m, r_s = moving.sweep(q, 0).ranges[0], still.sweep(q, 0).ranges[0]
+    scan = Lidar2D.empty_message(type("Sensor", (), {"_model": moving})())
+    assert scan.time_increment == pytest.approx(moving.sweep_time / 1080)
+    age = (len(a) - 1 - np.arange(len(a))) * scan.time_increment
+    v = np.isfinite(r_m)
+    pts = np.column_stack([r_m * np.cos(a), r_m * np.sin(a)])[v]
+    fixed = deskew_scan(pts, age[v], np.array([1.5, 0.2, 0.5]))
+    # the surfaces, densely: the motion-free returns with 20 points per gap between neighbours
+    s = np.column_stack([r_s * np.cos(a), r_s * np.sin(a)])
+    ok = np.isfinite(r_s[:-1]) & np.isfinite(r_s[1:])
+    ok &= np.linalg.norm(s[1:] - s[:-1], axis=1) < 0.5  # same surface
+    u = np.linspace(0, 1, 20)[None, :, None]
+    dense = (s[:-1][ok][:, None] * (1 - u) + s[1:][ok][:, None] * u).reshape(-1, 2)
+    tree = cKDTree(dense)
+    before, after = tree.query(pts)[0], tree.query(fixed)[0]
+    assert np.percentile(before, 90) > 0.05  # the motion moved returns off the surfaces
+    assert np.percentile(after, 90) < 0.2 * np.percentile(before, 90)  # measured 8.3 cm → 1.8 mm
+
+
+def test_graph_slam_deskews_scans_that_say_their_beams_fired_over_time():
+    """Scans cast with their own motion around the pond, accelerating from rest to 3.6 m/s and
+    0.3 rad/s, fed as LaserScan messages: with de-skew (the SLAM's own twist estimate) the
+    track error is a fraction of the error without (measured 0.009 m against 0.082 m)."""
+    from usvdrake.sensors.messages import LaserScan
+
+    preset = preset_by_name("hokuyo_utm30lx")
+    cfg = LidarConfig(preset=preset.name, mount=[0, 0, 0.5, 0], noise=True)
+    model = LidarModel(preset, cfg, POND.scene, 1, 20)
+    steps, dt = 200, 0.1
+    a = 2 * np.pi * 0.8 * np.linspace(0, 1, steps) ** 2  # from rest, as a boat leaves its dock
+    xs, ys = 14 * np.cos(a), 8 * np.sin(a)
+    heading = np.unwrap(np.arctan2(8 * np.cos(a), -14 * np.sin(a)))
+    speed = np.hypot(np.gradient(xs, dt), np.gradient(ys, dt))
+    rate = np.gradient(heading, dt)
+    scans = []
+    for k in range(steps):
+        q = np.array([xs[k], ys[k], heading[k], speed[k], 0.0, rate[k]])
+        r = model.sweep(q, k).ranges[0]
+        scans.append(
+            LaserScan(
+                time=dt * k,
+                angle_min=model.layout.az0,
+                angle_increment=model.layout.daz,
+                scan_time=model.sweep_time,
+                time_increment=model.column_time[1] - model.column_time[0],
+                ranges=r,
+                valid=np.isfinite(r),
+            )
+        )
+    errors = {}
+    for deskew in (True, False):
+        slam = GraphSlam(
+            GraphSlamConfig(
+                map_resolution=0.2, map_origin=[-25.0, -15.0], map_size=[50.0, 30.0],
+                deskew=deskew,
+            ),
+            (xs[0], ys[0], heading[0]),
+        )  # fmt: skip
+        est = []
+        for scan in scans:
+            slam.process_scan(scan)
+            est.append(slam.sensor_pose.copy())
+        est = np.array(est)
+        errors[deskew] = np.sqrt(np.mean((est[:, 0] - xs) ** 2 + (est[:, 1] - ys) ** 2))
+    assert errors[True] < 0.3 * errors[False], errors

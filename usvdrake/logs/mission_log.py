@@ -345,6 +345,7 @@ def encode_scan(scan: LaserScan, frame_id: str = "lidar") -> bytes:
             "range_min": float(scan.range_min),
             "range_max": _finite(scan.range_max),
             "scan_time": float(scan.scan_time),
+            "time_increment": float(scan.time_increment),
         }
     )
 
@@ -360,6 +361,7 @@ def _decode_scan_v1(data: bytes) -> LaserScan:
         range_min=head["range_min"],
         range_max=head["range_max"],
         scan_time=head["scan_time"],
+        time_increment=head.get("time_increment", 0.0),
         ranges=r,
         valid=np.isfinite(r),
     )
@@ -393,6 +395,7 @@ def decode_scan(data: bytes) -> LaserScan:
         range_min=range_min,
         range_max=float(m.get("range_max", 0.0)),
         scan_time=float(m.get("scan_time", 0.0)),
+        time_increment=float(m.get("time_increment", 0.0)),
         ranges=np.where(valid, r, np.inf),
         valid=valid,
     )

@@ -40,6 +40,7 @@ def to_laser_scan(msg, stamp: float) -> LaserScan:
         range_min=float(msg.range_min),
         range_max=float(msg.range_max),
         scan_time=float(msg.scan_time),
+        time_increment=float(msg.time_increment),
         ranges=np.where(valid, r, np.inf),
         valid=valid,
     )

@@ -54,6 +54,10 @@ class Lidar2D(SampledLidar):
             range_min=m.preset.range_min,
             range_max=m.range_max,
             scan_time=m.sweep_time,
+            # the beams fire along the sweep only when the sweep's own motion is simulated
+            time_increment=float(m.column_time[1] - m.column_time[0])
+            if m.cfg.motion and len(m.column_time) > 1
+            else 0.0,
             ranges=np.full(m.layout.count, np.inf),
             valid=np.zeros(m.layout.count, bool),
         )

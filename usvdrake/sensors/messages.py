@@ -21,6 +21,9 @@ class LaserScan:
     range_min: float = 0.0  # [m]
     range_max: float = 0.0  # [m]
     scan_time: float = 0.0  # [s] duration of one revolution
+    # [s] between beams (ROS); beam i fired (n − 1 − i)·time_increment before ``time``; 0: all
+    # beams of one instant (nothing to de-skew, e.g. CARMEN logs or motion-free simulation)
+    time_increment: float = 0.0
     ranges: np.ndarray = field(default_factory=lambda: np.zeros(0))  # [m]
     valid: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
 
