@@ -340,6 +340,13 @@ def make_parser() -> argparse.ArgumentParser:
     m.add_argument("--reference", default=None, help="a log whose poses are ground truth (ATE)")
     m.add_argument("--resolution", type=float, default=0.1, help="map cell size [m]")
     m.add_argument("--max-scans", type=int, default=None, help="stop after this many scans")
+    m.add_argument(
+        "--garbage",
+        type=float,
+        default=0.0,
+        help="robustness test: replace this fraction of scans by garbage (random, half-empty, NaN)",
+    )
+    m.add_argument("--seed", type=int, default=0, help="which scans --garbage replaces")
     m.add_argument("--quiet", action="store_true", help="no progress bar")
     m.set_defaults(func=cmd_slam2d)
     s3 = sub.add_parser("slam3d", help="lidar-IMU-GPS factor-graph SLAM (000 §V) on a recording")
@@ -416,8 +423,17 @@ def cmd_analyze_stability(args) -> int:
 def cmd_slam2d(args) -> int:
     from usvdrake.systems.slam.offline import run_slam2d
 
+    if not 0.0 <= args.garbage <= 1.0:
+        raise ConfigError("command line", "--garbage", "a fraction in [0, 1]", args.garbage)
     metrics = run_slam2d(
-        args.log, args.out, args.reference, args.resolution, args.max_scans, progress=not args.quiet
+        args.log,
+        args.out,
+        args.reference,
+        args.resolution,
+        args.max_scans,
+        progress=not args.quiet,
+        garbage=args.garbage,
+        seed=args.seed,
     )
     width = max(len(k) for k in metrics)
     for key, value in metrics.items():

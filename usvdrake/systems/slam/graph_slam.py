@@ -49,6 +49,11 @@ class GraphSlamConfig:
     # correlative search (Olson 2009); lower = more robust to large motions, slower
     correlative_trigger: float = 2.0
     min_link_points: int = 40  # correspondences a match needs
+    # [m] RMS point-to-line error above which a tracking match failed (garbage, a blinded or
+    # half-empty scan): the pose follows the constant-velocity guess and the scan never
+    # becomes a node, so it cannot become the reference of the scans after it
+    max_track_residual: float = 0.2
+    reanchor_after: int = 10  # [scans] failed in a row: the current scan becomes a node
     loop_index_gap: int = 40  # [nodes] index difference that makes a loop candidate
     loop_radius: float = 6.0  # [m] distance that makes a loop candidate
     max_loop_residual: float = 0.05  # [m] stricter acceptance for loops (a false loop is costly)
@@ -144,6 +149,7 @@ class GraphSlam:
         self._last_t: float | None = None  # [s] time of the last tracked scan
         self._last_dt = 0.0  # [s] between the last two tracked scans
         self._twist: np.ndarray | None = None  # (v_x, v_y, ω) of the sensor, smoothed
+        self._fail_streak = 0  # tracking matches failed in a row
         res = cfg.map_resolution
         shape = (int(cfg.map_size[1] / res), int(cfg.map_size[0] / res))
         self.map = LogOddsGrid(tuple(cfg.map_origin), res, shape)
@@ -165,7 +171,12 @@ class GraphSlam:
         """Track one scan; returns the current pose (x, y, θ)."""
         t0 = time.perf_counter()
         if len(points) < self.cfg.min_link_points:
-            self.stats["failed_matches"] += 1  # too few returns to match: keep the pose
+            # too few returns to match (blinded, NaN): coast on the constant velocity
+            self.stats["failed_matches"] += 1
+            if self.nodes:
+                self._rel = compose(self._rel, self._last_step)
+                self.pose = compose(self.nodes[-1].pose, self._rel)
+                self._record(t)
             return self.pose.copy()
         if not self.nodes:
             self._add_node(self.pose.copy(), points, ranges, angles, t)
@@ -183,10 +194,17 @@ class GraphSlam:
             retry = plicp(last.points, points, initial=tuple(seed), tree=last.tree)
             if retry.n_valid >= self.cfg.min_link_points and retry.residual < res.residual:
                 res = retry
-        if res.n_valid < self.cfg.min_link_points or not np.isfinite(res.theta):
+        failed = (
+            res.n_valid < self.cfg.min_link_points
+            or not np.isfinite(res.theta)
+            or not res.residual <= self.cfg.max_track_residual
+        )
+        if failed:
             self.stats["failed_matches"] += 1
+            self._fail_streak += 1
             rel = guess
         else:
+            self._fail_streak = 0
             rel = np.array([res.t[0], res.t[1], res.theta])
         self._last_step = between(self._rel, rel)
         self._last_dt = t - self._last_t if self._last_t is not None else 0.0
@@ -198,7 +216,7 @@ class GraphSlam:
             )
         self._rel = rel
         self.pose = compose(last.pose, rel)
-        if (
+        if not failed and (
             np.hypot(rel[0], rel[1]) > self.cfg.node_translation
             or abs(rel[2]) > self.cfg.node_rotation
         ):
@@ -208,6 +226,11 @@ class GraphSlam:
                 else None
             )
             self._new_node(points, ranges, angles, t, rel, cov)
+        elif failed and self._fail_streak >= self.cfg.reanchor_after:
+            # the last node itself may be the problem (e.g. a garbage first scan): start a new
+            # reference here, at the coasted pose, tied to the last by a weak constraint
+            self._new_node(points, ranges, angles, t, rel, None)
+            self._fail_streak = 0
         self._record(t)
         self.stats["tracking_ms"].append((time.perf_counter() - t0) * 1e3)
         return self.pose.copy()
@@ -287,7 +310,10 @@ class GraphSlam:
     # --- optimisation ---------------------------------------------------------------------------
     # --- the scan-SLAM backend protocol of ``LidarSlam2D`` ------------------------------------
     def process_scan(self, scan, max_range: float | None = None) -> None:
-        a, r, v = scan.angles, scan.ranges, scan.valid
+        a, r = scan.angles, np.asarray(scan.ranges, float)
+        with np.errstate(invalid="ignore"):  # NaN ranges (a broken driver): not returns
+            v = np.asarray(scan.valid, bool) & np.isfinite(r) & (r > 0)
+        r = np.where(v, r, np.inf)  # what the map renders: no return
         points = np.column_stack([r[v] * np.cos(a[v]), r[v] * np.sin(a[v])])
         if self.cfg.deskew and scan.time_increment > 0 and self._twist is not None:
             age = (len(r) - 1 - np.flatnonzero(v)) * scan.time_increment

@@ -8,12 +8,46 @@ ATE is computed after an SE(2) alignment (Sturm et al. 2012).
 
 import json
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from usvdrake.logs.carmen import read_carmen, read_poses
 from usvdrake.systems.slam.graph_slam import GraphSlam, GraphSlamConfig, compose
+
+GARBAGE_KINDS = ("random", "half_empty", "nan")
+
+
+def corrupt_scans(scans: list, fraction: float, seed: int = 0) -> tuple[list, np.ndarray]:
+    """A copy of ``scans`` (records with ``.scan``) where a ``fraction`` of them, chosen at
+    random, is replaced by garbage, the kinds in turn (:data:`GARBAGE_KINDS`): uniformly random
+    ranges over the sensor's span; half the beams (a contiguous half) without return; every
+    range NaN while flagged valid (a broken driver). Returns (scans, indices replaced)."""
+    if not 0.0 <= fraction <= 1.0:
+        raise ValueError(f"corrupt_scans: fraction must be in [0, 1], got {fraction}")
+    rng = np.random.default_rng(seed)
+    n = len(scans)
+    picked = np.sort(rng.choice(n, size=int(round(fraction * n)), replace=False))
+    out = list(scans)
+    for j, i in enumerate(picked):
+        scan = scans[i].scan
+        r = np.asarray(scan.ranges, float).copy()
+        kind = GARBAGE_KINDS[j % len(GARBAGE_KINDS)]
+        if kind == "random":
+            hi = float(scan.range_max) if np.isfinite(scan.range_max) and scan.range_max else 30.0
+            r = rng.uniform(max(float(scan.range_min), 0.1), hi, len(r))
+            valid = np.ones(len(r), bool)
+        elif kind == "half_empty":
+            start = int(rng.integers(len(r)))
+            gone = (np.arange(len(r)) - start) % len(r) < len(r) // 2
+            r[gone] = np.inf
+            valid = np.asarray(scan.valid, bool) & ~gone
+        else:
+            r[:] = np.nan
+            valid = np.ones(len(r), bool)
+        out[i] = scans[i]._replace(scan=replace(scan, ranges=r, valid=valid))
+    return out, picked
 
 
 def run_graph_slam(scans, cfg: GraphSlamConfig, progress: bool = False):
@@ -26,10 +60,7 @@ def run_graph_slam(scans, cfg: GraphSlamConfig, progress: bool = False):
 
         iterator = tqdm(scans, unit="scan")
     for rec in iterator:
-        scan = rec.scan
-        a, r, v = scan.angles, scan.ranges, scan.valid
-        pts = np.column_stack([r[v] * np.cos(a[v]), r[v] * np.sin(a[v])])
-        slam.process(pts, r, a, rec.timestamp)
+        slam.process_scan(replace(rec.scan, time=rec.timestamp))
         slam.optimise_pending()
         stamps.append(rec.timestamp)
         anchors.append((max(len(slam.nodes) - 1, 0), slam._rel.copy()))
@@ -46,9 +77,12 @@ def run_slam2d(
     resolution: float = 0.1,
     max_scans: int | None = None,
     progress: bool = True,
+    garbage: float = 0.0,
+    seed: int = 0,
 ) -> dict:
     """Run the graph SLAM on a CARMEN log or a ROS bag; write trajectory.tum, map.png,
-    metrics.json."""
+    metrics.json. ``garbage``: the fraction of scans replaced by garbage first
+    (:func:`corrupt_scans`, seeded by ``seed``), to test robustness."""
     from usvdrake.analysis.trajectory_metrics import ate, trajectory_from_planar, write_tum
     from usvdrake.logs.rosbag import is_bag, read_bag_scans
     from usvdrake.typed_yaml import ConfigError
@@ -70,6 +104,9 @@ def run_slam2d(
         scans = scans[:max_scans]
     if not scans:
         raise ConfigError(log, "", "laser scans", "none")
+    corrupted = np.zeros(0, int)
+    if garbage > 0:
+        scans, corrupted = corrupt_scans(scans, garbage, seed)
     # the sensor's own range (CARMEN logs: 50 m; no-returns are beyond it)
     max_range = min(50.0, max(float(rec.scan.range_max) or 50.0 for rec in scans))
     cfg = GraphSlamConfig(
@@ -98,6 +135,7 @@ def run_slam2d(
     metrics = {
         "log": str(log),
         "scans": len(scans),
+        "garbage_scans": len(corrupted),
         "slam_nodes": len(slam.nodes),
         "slam_constraints": len(slam.constraints),
         "slam_loops": int(slam.stats["loops"]),
