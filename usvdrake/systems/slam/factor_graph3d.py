@@ -1,7 +1,7 @@
 """Factor-graph back end of Roboat II's lidar-IMU-GPS SLAM on iSAM2 (000 §V), numerical core.
 
 The graph has one variable type, the keyframe pose X(k) ∈ SE(3) (gtsam ``Pose3``, world = the
-local ENU frame of :class:`usvdrake.sensors.geodesy.LocalFrame`), and three factor types
+local ENU frame of :class:`usvdrake.sensors.geodesy.LocalFrame`), and these factors
 (000 §V, Fig. 6), after LIO-SAM (Shan et al., IROS 2020, 000 ref. [22]):
 
 * **Keyframes** (000 §V-A): a lidar frame becomes a keyframe when the vessel has moved more
@@ -352,6 +352,8 @@ class FactorGraph3D:
             graph.add(gtsam.PriorFactorPose3(X(0), gtsam.Pose3(T_k), self._prior_noise))
         else:
             fmap = self._submap(range(max(0, k - c.submap_keyframes), k))
+            for i in [i for i in self._world_cache if i < k - c.submap_keyframes]:
+                del self._world_cache[i]  # only the sliding window is reused
             res = register_scan(features, fmap, T_guess, c.registration)
             T_k = res.T if np.all(np.isfinite(res.T)) else T_guess
             delta = np.linalg.inv(self._poses[k - 1]) @ T_k

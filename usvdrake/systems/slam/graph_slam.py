@@ -176,6 +176,7 @@ class GraphSlam:
             if self.nodes:
                 self._rel = compose(self._rel, self._last_step)
                 self.pose = compose(self.nodes[-1].pose, self._rel)
+                self._last_t = t  # the next step is measured from this coasted pose
                 self._record(t)
             return self.pose.copy()
         if not self.nodes:
