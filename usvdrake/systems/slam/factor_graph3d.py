@@ -35,7 +35,7 @@ gtsam in one object, so a later LeafSystem can keep it in its Context.
 """
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import gtsam
 import numpy as np
@@ -271,6 +271,10 @@ class FactorGraph3D:
         )
         self._gate = float(chi2.ppf(c.gps_gate_probability, 3))
         self._attitude_noise = gtsam.noiseModel.Isotropic.Sigma(2, max(c.attitude_sigma, 1e-9))
+        # the odometry match on features already down-sampled by add_keyframe
+        self._registration_ds = replace(
+            c.registration, source_edge_voxel=0.0, source_planar_voxel=0.0
+        )
         self._edges: list[np.ndarray] = []  # per keyframe F^e (N × 3) [m], sensor frame
         self._planes: list[np.ndarray] = []  # per keyframe F^p
         self._poses = np.zeros((0, 4, 4))  # current estimates T_world_keyframe (n × 4 × 4)
@@ -341,8 +345,8 @@ class FactorGraph3D:
         values = gtsam.Values()
         t0 = time.perf_counter()
         # kept down-sampled as registered (LIO-SAM stores its keyframes' "DS" clouds): the
-        # submaps merge 25 of them per keyframe (register_scan's own down-sampling of them is
-        # then a no-op: each point already has a voxel to itself)
+        # submaps merge 25 of them per keyframe; register_scan is told not to filter again
+        # (a centroid stays in its voxel, so a second pass would only re-sort the points)
         r = c.registration
         edges = voxel_downsample(features.edge_points, r.source_edge_voxel)
         planes = voxel_downsample(features.planar_points, r.source_planar_voxel)
@@ -354,7 +358,7 @@ class FactorGraph3D:
             fmap = self._submap(range(max(0, k - c.submap_keyframes), k))
             for i in [i for i in self._world_cache if i < k - c.submap_keyframes]:
                 del self._world_cache[i]  # only the sliding window is reused
-            res = register_scan(features, fmap, T_guess, c.registration)
+            res = register_scan(features, fmap, T_guess, self._registration_ds)
             T_k = res.T if np.all(np.isfinite(res.T)) else T_guess
             delta = np.linalg.inv(self._poses[k - 1]) @ T_k
             noise = self._noise(res, c.registration)
@@ -547,7 +551,7 @@ class FactorGraph3D:
 
     def estimate(self) -> list[np.ndarray]:
         """Current estimates T_world_keyframe (4 × 4 each), one per keyframe."""
-        return [T.copy() for T in self._poses]
+        return list(self.poses())
 
     def poses(self) -> np.ndarray:
         """Current estimates T_world_keyframe as one array (n × 4 × 4), a copy."""

@@ -319,7 +319,7 @@ class GraphSlam:
         if self.cfg.deskew and scan.time_increment > 0 and self._twist is not None:
             age = (len(r) - 1 - np.flatnonzero(v)) * scan.time_increment
             points = deskew_scan(points, age, self._twist)
-            r, a = r.copy(), a.copy()  # the rays the map renders follow the points
+            # the rays the map renders follow the points (r, a are this call's own arrays)
             r[v], a[v] = (
                 np.hypot(points[:, 0], points[:, 1]),
                 np.arctan2(points[:, 1], points[:, 0]),

@@ -392,8 +392,7 @@ class LidarInertialSlam:
 
     def trajectory(self) -> tuple[np.ndarray, np.ndarray]:
         """(keyframe times (n,), current keyframe estimates (n × 4 × 4))."""
-        poses = self.graph.estimate()
-        return np.array([k.time for k in self.keyframes]), np.array(poses).reshape(-1, 4, 4)
+        return np.array([k.time for k in self.keyframes]), self.graph.poses()
 
     def __deepcopy__(self, memo) -> "LidarInertialSlam":
         """Shared, not copied: gtsam's iSAM2 Bayes tree cannot be copied, and Drake copies a
