@@ -273,3 +273,38 @@ def test_five_percent_garbage_scans_keep_the_ate_within_1_5x():
         if name == "garbage":
             assert slam.stats["failed_matches"] >= 5  # the garbage was noticed, not matched
     assert ate["garbage"] <= 1.5 * ate["clean"] + 0.01, ate
+
+
+def test_gnc_rejects_a_false_loop_and_keeps_the_true_one():
+    """Full optimisation with ``loop_gnc``: a loop 2 m off is an outlier, the true one closes."""
+    from usvdrake.systems.slam.graph_slam import Constraint, Node
+
+    rng = np.random.default_rng(3)
+    side = [np.array([2.0, 0.0, 0.0])] * 4 + [np.array([2.0, 0.0, np.pi / 2])]
+    steps = side * 4  # a 8 × 8 m square, 20 nodes, back to the start
+    truth = [np.zeros(3)]
+    for s in steps:
+        truth.append(compose(truth[-1], s))
+    slam = GraphSlam(GraphSlamConfig(loop_gnc=True, map_size=[40.0, 40.0], map_origin=[-20, -20]))
+    sigma = np.array([0.02, 0.02, 0.01])
+    cov = np.diag(sigma**2)
+    for k, s in enumerate(steps):
+        z = s + rng.normal(0.0, sigma)
+        slam.constraints.append(Constraint(k, k + 1, z, cov, True, "consecutive"))
+    pose = np.zeros(3)
+    for k in range(len(truth)):
+        slam.nodes.append(Node(pose.copy(), np.zeros((1, 2)), np.array([np.inf]), np.zeros(1), k))
+        slam.nodes[-1].rendered_pose = pose.copy()
+        if k < len(steps):
+            pose = compose(pose, slam.constraints[k].z)
+    last = len(truth) - 1
+    true_loop = between(truth[0], truth[last])
+    false_loop = between(truth[4], truth[last]) + [0.0, 2.0, 0.0]  # an aliased match
+    slam.constraints.append(Constraint(0, last, true_loop, cov, False, "loop"))
+    slam.constraints.append(Constraint(4, last, false_loop, cov, False, "loop"))
+    drift = np.hypot(*(slam.nodes[-1].pose[:2] - truth[-1][:2]))
+    assert drift > 0.3  # what the true loop has to undo
+    slam.optimise(full=True)
+    assert slam._rejected == {len(slam.constraints) - 1}  # the false loop, the last added
+    err = [np.hypot(*(nd.pose[:2] - t[:2])) for nd, t in zip(slam.nodes, truth, strict=True)]
+    assert max(err) < 0.25  # the false loop kept (Gaussian, no GNC) bends the square by 2 m

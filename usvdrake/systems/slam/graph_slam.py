@@ -2,6 +2,9 @@
 
 * **Tracking**: every scan is matched by PLICP (002 eqs. 1-3) against the latest node's scan,
   starting from the previous relative motion; the pose is the node's pose composed with it.
+  A poor match (``correlative_trigger``; 0: every scan) is re-seeded by the branch-and-bound
+  correlative search (Olson 2009, :mod:`correlative`) over ± ``search_linear_window`` /
+  ± ``search_angular_window``, which wins if its likelihood is ``search_prior_margin`` higher.
 * **Nodes**: a new node when the match exceeds ``node_translation`` or ``node_rotation``. Its
   consecutive constraint (to the previous node) carries the Censi covariance (002 eqs. 4-10)
   and is robustified with Barron's kernel (002 eqs. 13-14, ``alpha``, ``c``); it is also
@@ -15,6 +18,12 @@
   PLICP's rotation search); an accepted match adds a robustified loop constraint and marks the
   whole graph for optimisation, which :meth:`GraphSlam.optimise_pending` runs when the caller
   decides (its own slower event in ``LidarSlam2D``, so the per-scan update never stalls).
+  For logs whose drift outgrows PLICP's basin (ours, not 002's): ``loop_per_chain`` matches one
+  node per earlier pass; ``loop_linear_window`` > 0 first searches the new node's recent scans
+  against the candidate's neighbours by the correlative matcher and refuses fits that are weak
+  (``min_loop_score``) or repeated elsewhere in the window (``max_loop_ambiguity``: corridors);
+  ``loop_gnc`` makes loops Gaussian and lets each full optimisation reject inconsistent ones by
+  graduated non-convexity (Yang et al. 2020, gtsam's GncLMOptimizer with the TLS loss).
 * **Map** (002 §IV): a log-odds grid; a node's scan is inserted when the node is created and
   re-rendered (removed at its old pose, inserted at its new one) when optimisation moved it by
   more than ``rerender_translation`` / ``rerender_rotation``.
@@ -32,7 +41,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from usvdrake.systems.slam.censi_covariance import plicp_covariance
-from usvdrake.systems.slam.correlative import correlative_search
+from usvdrake.systems.slam.correlative import LikelihoodField, correlative_match
 from usvdrake.systems.slam.occupancy_mapping import LogOddsGrid
 from usvdrake.systems.slam.plicp import plicp
 from usvdrake.systems.slam.robust_kernel import gtsam_barron
@@ -48,6 +57,15 @@ class GraphSlamConfig:
     # a tracking match whose residual exceeds this many max_link_residual is re-seeded by a
     # correlative search (Olson 2009); lower = more robust to large motions, slower
     correlative_trigger: float = 2.0
+    search_linear_window: float = 1.2  # [m] ± translation of that search about the guess
+    search_angular_window: float = 0.7  # [rad] (~40°) ± rotation of that search
+    search_from_rest: bool = False  # centre it on no motion (True) or constant velocity
+    # the searched pose replaces PLICP's from the constant-velocity guess only if its
+    # likelihood score is higher by this much: along a featureless corridor the two tie and
+    # the motion model decides (Olson 2009's motion prior, as a margin)
+    search_prior_margin: float = 0.02
+    search_resolution: float = 0.05  # [m] its grid (and the likelihood field's cells)
+    search_sigma: float = 0.1  # [m] width of a reference point in the likelihood field
     min_link_points: int = 40  # correspondences a match needs
     # [m] RMS point-to-line error above which a tracking match failed (garbage, a blinded or
     # half-empty scan): the pose follows the constant-velocity guess and the scan never
@@ -58,6 +76,22 @@ class GraphSlamConfig:
     loop_radius: float = 6.0  # [m] distance that makes a loop candidate
     max_loop_residual: float = 0.05  # [m] stricter acceptance for loops (a false loop is costly)
     min_loop_points: int = 100  # correspondences a loop match needs
+    # [m] > 0: a loop candidate is first searched by the correlative matcher within this
+    # window (and ± loop_angular_window) of the graph's relative pose, and kept only if its
+    # likelihood score reaches min_loop_score; 0: PLICP's own rotation search (002)
+    loop_linear_window: float = 0.0
+    loop_submap: int = 3  # [nodes] either side of a loop candidate (before the new node) matched
+    loop_robust: bool = True  # Barron-robustified loop constraints (False: Gaussian)
+    # full optimisations reject outlier loops by GNC (TLS loss) instead of a robust kernel;
+    # the loops' covariance gets this floor [m, m, rad] (what a correct loop may still be off)
+    loop_gnc: bool = False
+    loop_min_sigma: list[float] = field(default_factory=lambda: [0.03, 0.03, 0.01])
+    loop_per_chain: bool = False  # match one node per pass near the new node, not every one
+    loop_max_chains: int = 8  # [-] passes matched per new node, nearest first
+    loop_angular_window: float = 0.5  # [rad]
+    loop_distinct: float = 0.5  # [m] a runner-up pose this far from the best is a rival
+    max_loop_ambiguity: float = 0.9  # [-] rival score / best score above which a loop is refused
+    min_loop_score: float = 0.5  # [-] mean likelihood of the loop scan's points, in [0, 1]
     alpha: float = 0.0  # Barron α of the robustified constraints (0: Cauchy)
     c: float = 1.0  # Barron scale c (in units of the whitened error)
     range_sigma: float = 0.02  # [m] range noise for the Censi covariance
@@ -126,6 +160,18 @@ class Node:
     time: float
     rendered_pose: np.ndarray | None = None  # the pose its scan is in the map with
     tree: cKDTree | None = None
+    _field: LikelihoodField | None = None
+
+    def field(self, cfg: "GraphSlamConfig") -> LikelihoodField:
+        """The likelihood field of its scan (built on first use, shared by copies)."""
+        if self._field is None:
+            self._field = LikelihoodField.build(
+                self.points,
+                cfg.search_resolution,
+                cfg.search_sigma,
+                margin=max(cfg.search_linear_window, cfg.loop_linear_window) + 1.0,
+            )
+        return self._field
 
 
 @dataclass
@@ -150,6 +196,7 @@ class GraphSlam:
         self._last_dt = 0.0  # [s] between the last two tracked scans
         self._twist: np.ndarray | None = None  # (v_x, v_y, ω) of the sensor, smoothed
         self._fail_streak = 0  # tracking matches failed in a row
+        self._rejected: frozenset[int] = frozenset()  # loop constraints GNC called outliers
         res = cfg.map_resolution
         shape = (int(cfg.map_size[1] / res), int(cfg.map_size[0] / res))
         self.map = LogOddsGrid(tuple(cfg.map_origin), res, shape)
@@ -191,9 +238,19 @@ class GraphSlam:
         if res.n_valid < self.cfg.min_link_points or res.residual > trigger:
             # a failed match from the constant-velocity guess: seed PLICP by a correlative search
             # over rotations × translations (Olson 2009) and keep the better of the two
-            seed, _ = correlative_search(last.points, points, guess)
+            seed = correlative_match(
+                last.field(self.cfg),
+                points,
+                self._rel if self.cfg.search_from_rest else guess,
+                self.cfg.search_linear_window,
+                self.cfg.search_angular_window,
+            ).pose
             retry = plicp(last.points, points, initial=tuple(seed), tree=last.tree)
-            if retry.n_valid >= self.cfg.min_link_points and retry.residual < res.residual:
+            if retry.n_valid >= self.cfg.min_link_points and (
+                res.n_valid < self.cfg.min_link_points
+                or self._score(last, points, retry)
+                > self._score(last, points, res) + self.cfg.search_prior_margin
+            ):
                 res = retry
         failed = (
             res.n_valid < self.cfg.min_link_points
@@ -235,6 +292,10 @@ class GraphSlam:
         self._record(t)
         self.stats["tracking_ms"].append((time.perf_counter() - t0) * 1e3)
         return self.pose.copy()
+
+    def _score(self, node: Node, points: np.ndarray, res) -> float:
+        """Likelihood score of ``points`` at a match result in ``node``'s field."""
+        return node.field(self.cfg).score(points, (res.t[0], res.t[1], res.theta))
 
     def _record(self, t: float) -> None:
         if len(self._anchors.items) != self._n_anchors:  # another copy appended: fork
@@ -282,9 +343,8 @@ class GraphSlam:
             if np.hypot(*(other.pose[:2] - node.pose[:2])) <= self.cfg.link_radius:
                 self._link(i, k, robust=False, kind="link")
         loop = False
-        for i in range(0, k - self.cfg.loop_index_gap):
-            if np.hypot(*(self.nodes[i].pose[:2] - node.pose[:2])) <= self.cfg.loop_radius:
-                loop |= self._link(i, k, robust=True, kind="loop", search=True)
+        for i in self._loop_candidates(k):
+            loop |= self._link(i, k, robust=self.cfg.loop_robust, kind="loop", search=True)
         t0 = time.perf_counter()
         self.optimise(full=False)
         self.stats["optimisation_ms"].append((time.perf_counter() - t0) * 1e3)
@@ -292,10 +352,69 @@ class GraphSlam:
             self.stats["loops"] += 1
             self.full_pending = True  # the whole graph, at the caller's pace (optimise_pending)
 
+    def _loop_candidates(self, k: int) -> list[int]:
+        """Older nodes (index gap ≥ ``loop_index_gap``) within ``loop_radius`` of node k; with
+        ``loop_per_chain``, only the nearest of each run of consecutive such nodes (one pass
+        of the vessel), at most ``loop_max_chains`` of them, nearest first."""
+        old = np.arange(max(0, k - self.cfg.loop_index_gap))
+        if not len(old):
+            return []
+        poses = np.array([self.nodes[i].pose[:2] for i in old])
+        d = np.hypot(*(poses - self.nodes[k].pose[:2]).T)
+        near = old[d <= self.cfg.loop_radius]
+        if not self.cfg.loop_per_chain or not len(near):
+            return list(near)
+        runs = np.split(near, np.flatnonzero(np.diff(near) > 1) + 1)
+        best = [int(run[np.argmin(d[run])]) for run in runs]
+        best.sort(key=lambda i: d[i])
+        return best[: self.cfg.loop_max_chains]
+
+    def _submap(self, k: int, indices) -> np.ndarray:
+        """The scans of the nodes ``indices`` (those that exist) in node k's frame."""
+        base = self.nodes[k].pose
+        parts = []
+        for j in indices:
+            if 0 <= j < len(self.nodes):
+                x, y, th = between(base, self.nodes[j].pose)
+                c, s = np.cos(th), np.sin(th)
+                p = self.nodes[j].points
+                parts.append(
+                    np.column_stack([c * p[:, 0] - s * p[:, 1] + x, s * p[:, 0] + c * p[:, 1] + y])
+                )
+        return np.vstack(parts)
+
     def _link(self, i: int, k: int, robust: bool, kind: str, search: bool = False) -> bool:
         a, b = self.nodes[i], self.nodes[k]
         guess = between(a.pose, b.pose)
-        res = plicp(a.points, b.points, initial=tuple(guess), tree=a.tree, rotation_search=search)
+        rotation_search = search
+        if search and self.cfg.loop_linear_window > 0:
+            h = self.cfg.loop_submap
+            reference = LikelihoodField.build(
+                self._submap(i, range(i - h, i + h + 1)),
+                self.cfg.search_resolution,
+                self.cfg.search_sigma,
+                margin=self.cfg.loop_linear_window + 1.0,
+            )
+            match = correlative_match(
+                reference,
+                self._submap(k, range(k - h, k + 1)),
+                guess,
+                self.cfg.loop_linear_window,
+                self.cfg.loop_angular_window,
+                distinct=self.cfg.loop_distinct,
+            )
+            guess = match.pose
+            # a weak fit, or one the scene repeats (a corridor): not a loop
+            if (
+                match.score < self.cfg.min_loop_score
+                or match.runner_up > self.cfg.max_loop_ambiguity * match.score
+            ):
+                self.stats["failed_matches"] += 1
+                return False
+            rotation_search = False
+        res = plicp(
+            a.points, b.points, initial=tuple(guess), tree=a.tree, rotation_search=rotation_search
+        )
         loop = kind == "loop"
         need = self.cfg.min_loop_points if loop else self.cfg.min_link_points
         limit = self.cfg.max_loop_residual if loop else self.cfg.max_link_residual
@@ -356,25 +475,49 @@ class GraphSlam:
         """LM over the window (or the whole graph) with gtsam; moves nodes and re-renders them."""
         n = len(self.nodes)
         active = set(range(n)) if full else set(range(max(0, n - self.cfg.window), n))
+        gnc = full and self.cfg.loop_gnc
         graph = gtsam.NonlinearFactorGraph()
         values = gtsam.Values()
-        used = set()
-        for c in self.constraints:
-            if c.i in active or c.j in active:
+        used, inliers, loops = set(), [], []
+        loop_floor = np.diag(np.square(self.cfg.loop_min_sigma))
+        for n_c, c in enumerate(self.constraints):
+            if not (c.i in active or c.j in active):
+                continue
+            if c.kind == "loop" and (gnc or n_c in self._rejected):
+                if not gnc:
+                    continue
+                loops.append((n_c, graph.size()))
+                noise = gtsam.noiseModel.Gaussian.Covariance(c.cov + loop_floor)
+            else:
+                inliers.append(graph.size())
                 noise = gtsam.noiseModel.Gaussian.Covariance(c.cov)
-                if c.robust:
+                if c.robust and not gnc:
                     noise = gtsam.noiseModel.Robust.Create(self._robust, noise)
-                graph.add(gtsam.BetweenFactorPose2(c.i, c.j, gtsam.Pose2(*c.z), noise))
-                used.update((c.i, c.j))
+            graph.add(gtsam.BetweenFactorPose2(c.i, c.j, gtsam.Pose2(*c.z), noise))
+            used.update((c.i, c.j))
         fixed = gtsam.noiseModel.Diagonal.Sigmas(np.array([1e-6, 1e-6, 1e-7]))
         anchor = min(active)
         for k in used | {anchor}:
             values.insert(k, gtsam.Pose2(*self.nodes[k].pose))
             if k not in active or k == anchor:
+                inliers.append(graph.size())
                 graph.add(gtsam.PriorFactorPose2(k, gtsam.Pose2(*self.nodes[k].pose), fixed))
         params = gtsam.LevenbergMarquardtParams()
         params.setMaxIterations(self.cfg.max_iterations)
-        result = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
+        if gnc and loops:
+            # graduated non-convexity with the truncated least squares loss (Yang et al.
+            # 2020): every loop is a candidate, the tracking chain and the anchor are known
+            # inliers; loops left with weight < 0.5 are outliers until the next full solve
+            gnc_params = gtsam.GncLMParams(params)
+            gnc_params.setLossType(gtsam.GncLossType.TLS)
+            gnc_params.setKnownInliers(inliers)
+            optimiser = gtsam.GncLMOptimizer(graph, values, gnc_params)
+            result = optimiser.optimize()
+            weights = np.asarray(optimiser.getWeights())
+            self._rejected = frozenset(n_c for n_c, f in loops if weights[f] < 0.5)
+            self.stats["rejected_loops"] = len(self._rejected)
+        else:
+            result = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
         for k in used | {anchor}:
             p = result.atPose2(k)
             self.nodes[k].pose = np.array([p.x(), p.y(), p.theta()])

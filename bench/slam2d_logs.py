@@ -1,0 +1,61 @@
+"""Benchmark: scan-only 2D graph SLAM on the "corrected" CARMEN building logs (issue 6).
+
+Runs ``usvdrake slam2d``'s offline runner (:func:`usvdrake.systems.slam.offline.run_slam2d`,
+:data:`~usvdrake.systems.slam.offline.LOG_CONFIG`, no odometry) on each corrected log found in
+``--data`` (default ``../shared/data/carmen/corrected``: Intel, MIT-CSAIL, Freiburg 079 and
+ACES, subsampled scans with SLAM-corrected poses) and scores it by ATE against the log's own
+poses after an SE(2) alignment. Prints one JSON object: per log ``ate_m`` (target ≤ 0.10),
+``realtime_factor`` (log duration / wall time; ≥ 1 keeps up), nodes, loops accepted and
+rejected by GNC; and ``reached`` per log.
+"""
+
+import argparse
+import json
+import tempfile
+from pathlib import Path
+
+from usvdrake.systems.slam.offline import run_slam2d
+
+LOGS = ("intel", "csail", "freiburg-079", "aces")
+TARGET_ATE = 0.10  # [m] issue 6
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    here = Path(__file__).resolve().parent
+    parser.add_argument("--data", default=str(here.parent.parent / "shared/data/carmen/corrected"))
+    parser.add_argument("--logs", nargs="*", default=list(LOGS), help=f"some of {LOGS}")
+    parser.add_argument("--out", help="keep each run's trajectory, map and metrics here")
+    args = parser.parse_args()
+    data = Path(args.data)
+    if not data.is_dir():
+        raise SystemExit(f"slam2d_logs: no directory {data} (pass --data)")
+    results = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(args.out) if args.out else Path(tmp)
+        for name in args.logs:
+            log = data / f"{name}-corrected.log.gz"
+            if not log.is_file():
+                results[name] = {"error": f"no {log.name}"}
+                continue
+            m = run_slam2d(log, out / name, reference=log, progress=False)
+            results[name] = {
+                "ate_m": m["ate_m"],
+                "reached": m["ate_m"] <= TARGET_ATE,
+                "scans": m["scans"],
+                "slam_nodes": m["slam_nodes"],
+                "slam_loops": m["slam_loops"],
+                "rejected_loops": m["rejected_loops"],
+                "tracking_ms_median": m["tracking_ms_median"],
+                "wall_time_s": m["wall_time_s"],
+                "realtime_factor": m["realtime_factor"],
+            }
+    print(
+        json.dumps(
+            {"benchmark": "slam2d_logs", "target_ate_m": TARGET_ATE, "logs": results}, indent=2
+        )
+    )
+
+
+if __name__ == "__main__":
+    main()
