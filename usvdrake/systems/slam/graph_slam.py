@@ -64,6 +64,7 @@ class GraphSlamConfig:
     # likelihood score is higher by this much: along a featureless corridor the two tie and
     # the motion model decides (Olson 2009's motion prior, as a margin)
     search_prior_margin: float = 0.02
+    refine_max_distance: float = 1.0  # [m] PLICP's pairing distance refining the search
     search_resolution: float = 0.05  # [m] its grid (and the likelihood field's cells)
     search_sigma: float = 0.1  # [m] width of a reference point in the likelihood field
     min_link_points: int = 40  # correspondences a match needs
@@ -245,7 +246,14 @@ class GraphSlam:
                 self.cfg.search_linear_window,
                 self.cfg.search_angular_window,
             ).pose
-            retry = plicp(last.points, points, initial=tuple(seed), tree=last.tree)
+            # the seed is good to a grid cell: refine it locally, PLICP must not wander off
+            retry = plicp(
+                last.points,
+                points,
+                initial=tuple(seed),
+                tree=last.tree,
+                max_distance=self.cfg.refine_max_distance,
+            )
             if retry.n_valid >= self.cfg.min_link_points and (
                 res.n_valid < self.cfg.min_link_points
                 or self._score(last, points, retry)
@@ -386,7 +394,7 @@ class GraphSlam:
     def _link(self, i: int, k: int, robust: bool, kind: str, search: bool = False) -> bool:
         a, b = self.nodes[i], self.nodes[k]
         guess = between(a.pose, b.pose)
-        rotation_search = search
+        rotation_search, pairing = search, 1.0  # PLICP's own rotation search, default pairing
         if search and self.cfg.loop_linear_window > 0:
             h = self.cfg.loop_submap
             reference = LikelihoodField.build(
@@ -411,9 +419,14 @@ class GraphSlam:
             ):
                 self.stats["failed_matches"] += 1
                 return False
-            rotation_search = False
+            rotation_search, pairing = False, self.cfg.refine_max_distance
         res = plicp(
-            a.points, b.points, initial=tuple(guess), tree=a.tree, rotation_search=rotation_search
+            a.points,
+            b.points,
+            initial=tuple(guess),
+            tree=a.tree,
+            rotation_search=rotation_search,
+            max_distance=pairing,
         )
         loop = kind == "loop"
         need = self.cfg.min_loop_points if loop else self.cfg.min_link_points

@@ -25,8 +25,11 @@ STREAM_CONFIG = GraphSlamConfig(correlative_trigger=1.0)
 # The graph SLAM for CARMEN building logs, which may be subsampled (the "corrected" CARMEN logs step
 # ~0.7 m and ~22° between scans, far outside PLICP's basin) and have no odometry. Measured on
 # intel-corrected (910 scans; bench/slam2d_logs.py):
-# * every scan is also searched from rest by the correlative matcher (±1.5 m, ±52°), the
-#   search replacing PLICP's constant-velocity match when its likelihood is 0.05 higher;
+# * every scan is also searched from rest by the correlative matcher (±1.5 m, ±92°: MIT-CSAIL
+#   turns up to 78° between scans), the search replacing PLICP's constant-velocity match when
+#   its likelihood is 0.05 higher;
+#   PLICP refines a searched pose pairing points within 0.5 m only (from 1 m it wandered off
+#   a good seed: steps off by > 0.2 m or 3° went from 42 to 24 of 909, loops off);
 # * no dense links (a wrong one, Gaussian, bent the chain) and a node needs 20 matched points
 #   (open halls leave fewer than 40 returns);
 # * loops: one candidate per earlier pass within 4 m, searched within ±1.5 m / ±20°, the new
@@ -37,9 +40,10 @@ STREAM_CONFIG = GraphSlamConfig(correlative_trigger=1.0)
 LOG_CONFIG = GraphSlamConfig(
     correlative_trigger=0.0,
     search_linear_window=1.5,
-    search_angular_window=0.9,
+    search_angular_window=1.6,
     search_from_rest=True,
     search_prior_margin=0.05,
+    refine_max_distance=0.5,
     min_link_points=20,
     link_radius=0.0,
     loop_index_gap=15,
@@ -216,7 +220,13 @@ def _write_map_png(path: Path, grid) -> None:
     img = np.full(grid.data.shape, 0.75)
     img[grid.data == 0] = 1.0
     img[grid.data == 100] = 0.0
-    rows, cols = np.nonzero(grid.data != -1)
+    # cropped to the walls (with a 2 m margin): beams without a return clear free space out to
+    # the sensor's range, far beyond a building's walls
+    rows, cols = np.nonzero(grid.data == 100)
+    if not len(rows):
+        rows, cols = np.nonzero(grid.data != -1)
     if len(rows):
-        img = img[rows.min() : rows.max() + 1, cols.min() : cols.max() + 1]
+        m = int(np.ceil(2.0 / grid.resolution))
+        r0, c0 = max(rows.min() - m, 0), max(cols.min() - m, 0)
+        img = img[r0 : rows.max() + m + 1, c0 : cols.max() + m + 1]
     plt.imsave(path, img[::-1], cmap="gray", vmin=0.0, vmax=1.0)
