@@ -25,6 +25,8 @@ import numpy as np
 from numba import njit
 from scipy.ndimage import distance_transform_edt
 
+from usvdrake.systems.slam.plicp import rot
+
 
 def distance_field(points: np.ndarray, resolution: float, margin: float):
     """(field, origin): distance [m] from each cell centre to the nearest point; rows are y,
@@ -82,11 +84,8 @@ class LikelihoodField:
 
     def score(self, points: np.ndarray, pose) -> float:
         """Mean field value [0, 1] under ``points`` (sensor frame) placed at ``pose`` (x, y, θ)."""
-        c, s = np.cos(pose[2]), np.sin(pose[2])
-        x = c * points[:, 0] - s * points[:, 1] + pose[0]
-        y = s * points[:, 0] + c * points[:, 1] + pose[1]
-        gx = np.floor((x - self.origin[0]) / self.resolution).astype(int)
-        gy = np.floor((y - self.origin[1]) / self.resolution).astype(int)
+        placed = points @ rot(pose[2]).T + np.asarray(pose[:2], float)
+        gx, gy = np.floor((placed - self.origin) / self.resolution).astype(int).T
         rows, cols = self.fine.shape
         ok = (gx >= 0) & (gx < cols) & (gy >= 0) & (gy < rows)
         return float(self.fine[gy[ok], gx[ok]].sum() / max(len(points), 1))
@@ -210,19 +209,3 @@ def correlative_match(
     if distinct > 0:
         runner_up = max(_refine(*args, i, j, distinct / res)[0], 0.0) / len(pts)
     return CorrelativeMatch(pose, float(best / len(pts)), float(runner_up))
-
-
-def correlative_search(
-    reference: np.ndarray,
-    current: np.ndarray,
-    guess=(0.0, 0.0, 0.0),
-    linear_window: float = 1.2,
-    angular_window: float = np.deg2rad(40.0),
-    resolution: float = 0.05,
-    sigma: float = 0.1,
-) -> tuple[np.ndarray, float]:
-    """Best (t_x, t_y, θ) of ``current`` in ``reference``'s frame (both M × 2 points [m])
-    within the window around ``guess``, and its score (mean likelihood, higher is better):
-    :func:`correlative_match` on a field built for this one match."""
-    field = LikelihoodField.build(reference, resolution, sigma, margin=linear_window + 1.0)
-    return correlative_match(field, current, guess, linear_window, angular_window)[:2]

@@ -43,7 +43,7 @@ from scipy.spatial import cKDTree
 from usvdrake.systems.slam.censi_covariance import plicp_covariance
 from usvdrake.systems.slam.correlative import LikelihoodField, correlative_match
 from usvdrake.systems.slam.occupancy_mapping import LogOddsGrid
-from usvdrake.systems.slam.plicp import plicp
+from usvdrake.systems.slam.plicp import plicp, rot
 from usvdrake.systems.slam.robust_kernel import gtsam_barron
 
 
@@ -164,13 +164,14 @@ class Node:
     _field: LikelihoodField | None = None
 
     def field(self, cfg: "GraphSlamConfig") -> LikelihoodField:
-        """The likelihood field of its scan (built on first use, shared by copies)."""
+        """The likelihood field of its scan for the tracking search (built on first use,
+        shared by copies; loops search fields of submaps)."""
         if self._field is None:
             self._field = LikelihoodField.build(
                 self.points,
                 cfg.search_resolution,
                 cfg.search_sigma,
-                margin=max(cfg.search_linear_window, cfg.loop_linear_window) + 1.0,
+                margin=cfg.search_linear_window + 1.0,
             )
         return self._field
 
@@ -384,11 +385,7 @@ class GraphSlam:
         for j in indices:
             if 0 <= j < len(self.nodes):
                 x, y, th = between(base, self.nodes[j].pose)
-                c, s = np.cos(th), np.sin(th)
-                p = self.nodes[j].points
-                parts.append(
-                    np.column_stack([c * p[:, 0] - s * p[:, 1] + x, s * p[:, 0] + c * p[:, 1] + y])
-                )
+                parts.append(self.nodes[j].points @ rot(th).T + (x, y))
         return np.vstack(parts)
 
     def _link(self, i: int, k: int, robust: bool, kind: str, search: bool = False) -> bool:
