@@ -16,8 +16,11 @@ from pydrake.autodiffutils import ExtractGradient, ExtractValue, InitializeAutoD
 from pydrake.solvers import MathematicalProgramResult
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
+from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, Sine
 
+from usvdrake.sensors.imu import Imu
+from usvdrake.sensors.imu_interval import ImuIntervalMean
+from usvdrake.sensors.imu_model import ImuConfig
 from usvdrake.sensors.pose_sensor import PoseSensor, PoseSensorConfig, measure_pose, wrap_angle
 from usvdrake.sensors.thrust_sensor import ThrustSensor, ThrustSensorConfig, thrust_noise_scale
 from usvdrake.systems.estimation.nmhe_problem import NmheConfig, NmheProblem, _thrust_model
@@ -263,7 +266,10 @@ COMMAND = np.array([9.0, 14.0, 2.0, 2.0])  # [N] constant: ~0.6 m/s in a left tu
 Q0 = np.array([0.0, 0.0, 3.0, 0.6, 0.0, 0.0])  # ψ0 = 3 rad: the turn crosses ψ = π
 
 
-def build_diagram(seed: int = 7, nmhe: Nmhe | None = None):
+def build_diagram(seed: int = 7, nmhe: Nmhe | None = None, imu: bool = False, waves: bool = False):
+    """Plant + mixer + sensors + ``Nmhe`` under a constant command; ``imu``: with the IMU and
+    its interval means wired in; ``waves``: a wave-like force (±40 N surge, ±30 N sway, ±8 N m
+    yaw at 0.4-0.6 Hz) on the plant, which the NMHE's model does not know."""
     builder = DiagramBuilder()
     cmd = builder.AddNamedSystem("command", ConstantVectorSource(COMMAND))
     mixer = builder.AddNamedSystem("thrust_mixer", ThrustMixer(ROBOAT.thrusters))
@@ -280,13 +286,34 @@ def build_diagram(seed: int = 7, nmhe: Nmhe | None = None):
     builder.Connect(plant.GetOutputPort("state"), pose.GetInputPort("state"))
     builder.Connect(pose.GetOutputPort("pose_measurement"), nmhe.GetInputPort("pose_measurement"))
     builder.Connect(thrust.GetOutputPort("thrust_measured"), nmhe.GetInputPort("thrust_measured"))
+    if waves:
+        sine = builder.AddNamedSystem(
+            "waves", Sine([40.0, 30.0, 8.0], [2.8, 3.5, 3.1], [0.0, 1.0, 2.0], 3)
+        )
+        builder.Connect(sine.get_output_port(0), plant.GetInputPort("tau_env"))
+    if imu:
+        sensor = builder.AddNamedSystem("imu", Imu(ImuConfig(), seed))
+        mean = builder.AddNamedSystem(
+            "imu_mean", ImuIntervalMean(DT, 0.01, offset=0.5 * NmheConfig().update_offset)
+        )
+        builder.Connect(plant.GetOutputPort("state"), sensor.GetInputPort("state"))
+        builder.Connect(plant.GetOutputPort("acceleration"), sensor.GetInputPort("acceleration"))
+        builder.Connect(sensor.GetOutputPort("imu"), mean.GetInputPort("imu"))
+        builder.Connect(mean.GetOutputPort("imu_mean"), nmhe.GetInputPort("imu_mean"))
     logs = {
         "truth": LogVectorOutput(plant.GetOutputPort("state"), builder, DT),
         "estimate": LogVectorOutput(nmhe.GetOutputPort("state_estimate"), builder, DT),
+        "estimate_time": LogVectorOutput(nmhe.GetOutputPort("estimate_time"), builder, DT),
         "failures": LogVectorOutput(nmhe.GetOutputPort("nmhe_failures"), builder, DT),
         "solve_ms": LogVectorOutput(nmhe.GetOutputPort("nmhe_solve_ms"), builder, DT),
     }
     return builder.Build(), nmhe, logs
+
+
+def truth_at(truth: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """The logged truth (rows at k·DT) interpolated linearly at ``times``."""
+    grid = DT * np.arange(len(truth))
+    return np.column_stack([np.interp(times, grid, truth[:, i]) for i in range(6)])
 
 
 def run_diagram(diagram, logs, duration: float):
@@ -305,16 +332,18 @@ def diagram_run():
 
 def test_leaf_system_ports():
     nmhe = Nmhe(ROBOAT)
-    assert [nmhe.get_input_port(i).get_name() for i in range(2)] == [
+    assert [nmhe.get_input_port(i).get_name() for i in range(3)] == [
         "pose_measurement",
         "thrust_measured",
+        "imu_mean",
     ]
     assert nmhe.GetInputPort("thrust_measured").size() == 4
-    assert [nmhe.get_output_port(i).get_name() for i in range(4)] == [
+    assert [nmhe.get_output_port(i).get_name() for i in range(5)] == [
         "state_estimate",
         "tau_env_estimate",
         "nmhe_failures",
         "nmhe_solve_ms",
+        "estimate_time",
     ]
     # Before the first solve the output is the initial guess.
     q0 = np.array([1.0, 2.0, 0.5, 0.3, 0.0, 0.0])
@@ -327,10 +356,12 @@ def test_leaf_system_tracks_ground_truth_in_a_diagram():
     _, nmhe, _, ctx, data = diagram_run()
     truth, est = data["truth"], data["estimate"]
     assert truth[:, 2].max() > np.pi + 0.5  # the heading crossed π
-    # The estimate held over [t_k, t_{k+1}) is the estimate of q(t_{k+1}): the logger, like any
-    # system updating at t_{k+1}, reads it then — compare at equal log times.
+    # The update at t_k + 1 ms estimates q(t_k) from the samples just taken and holds it
+    # propagated to t_k + 2 ms (when the NMPC reads it): a logger at t_{k+1} sees that one.
+    t_est = data["estimate_time"][:, 0]
+    assert np.allclose(t_est[2:], DT * np.arange(1, len(t_est) - 1) + 0.002)
     k = slice(WARM_UP, None)
-    err = est[k] - truth[k]
+    err = est[k] - truth_at(truth, t_est)[k]
     err[:, 2] = wrap_angle(err[:, 2])
     assert np.all(rmse(err[:, 3:5]) <= 0.02), rmse(err)
     assert np.all(rmse(err[:, :2]) <= 0.03), rmse(err)
@@ -339,7 +370,7 @@ def test_leaf_system_tracks_ground_truth_in_a_diagram():
     assert data["failures"][-1, 0] == 0
     assert np.all(data["solve_ms"][2:, 0] > 0)
     diag = nmhe.diagnostics(nmhe.GetMyContextFromRoot(ctx))
-    assert diag["failures"] == 0 and diag["solves"] == 199  # updates at 0.1 … 19.9 s
+    assert diag["failures"] == 0 and diag["solves"] == 200  # updates at 0.001 … 19.901 s
     window = nmhe.window(nmhe.GetMyContextFromRoot(ctx))
     assert window.count == 20 and np.all(np.isfinite(window.z))
 
@@ -372,10 +403,10 @@ def test_failed_solves_are_counted_and_the_estimate_coasts(raise_error):
     ok_ctx, ok = run_diagram(diagram, logs, 1.0)
     nmhe.problem._solver = FailingSolver(raise_error)
     ctx, data = run_diagram(diagram, logs, 1.0)
-    assert data["failures"][-1, 0] == 9  # every update from 0.1 to 0.9 s
+    assert data["failures"][-1, 0] == 10  # every update from 0.001 to 0.901 s
     est, truth = data["estimate"], data["truth"]
     assert np.all(np.isfinite(est))
     # Coasting on the model from the initial state: the constant-thrust motion is predicted.
     assert np.abs(est[-1, :2] - truth[-1, :2]).max() < 0.1
-    assert nmhe.diagnostics(nmhe.GetMyContextFromRoot(ctx))["failures"] == 9
+    assert nmhe.diagnostics(nmhe.GetMyContextFromRoot(ctx))["failures"] == 10
     assert nmhe.diagnostics(nmhe.GetMyContextFromRoot(ok_ctx))["failures"] == 0

@@ -210,6 +210,7 @@ def run_hil(
                 "thrust_measured",
                 "pose_measurement",
                 "nmhe_solve_ms",
+                "estimate_time",
                 "watchdog_status",
                 "thruster_link",
             )
@@ -317,6 +318,7 @@ def _truth_metrics(scenario, vessel, context, logs, keep, times, states, report)
         return logs[name].data().T[keep] if name in logs else None
 
     nmhe_ms = logged("nmhe_solve_ms")
+    est_time = logged("estimate_time")
     out = control_estimation_metrics(
         vessel.GetSubsystemByName("autonomy"),
         context,
@@ -325,6 +327,7 @@ def _truth_metrics(scenario, vessel, context, logs, keep, times, states, report)
         logged("state_estimate"),
         logged("pose_measurement"),
         None if nmhe_ms is None else nmhe_ms.ravel(),
+        None if est_time is None else est_time.ravel(),
     )
     clearance = vessel_clearance(
         make_world(scenario.world, scenario.seed), states, load_vessel(scenario.vessel)

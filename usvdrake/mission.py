@@ -101,12 +101,13 @@ def _exploration_summary(
 
 
 def control_estimation_metrics(
-    autonomy, context, times, states, estimates, pose=None, nmhe_solve_ms=None
+    autonomy, context, times, states, estimates, pose=None, nmhe_solve_ms=None, estimate_times=None
 ) -> dict:
     """NMPC tracking RMSE and solve statistics, NMHE estimation errors and solve times, for the
     systems ``autonomy`` holds (empty if neither). ``times``/``states``: ground truth samples;
     ``estimates``: the logged ``state_estimate`` at those times; ``pose``: the logged pose
-    measurements; ``nmhe_solve_ms``: the logged ``nmhe_solve_ms`` output."""
+    measurements; ``nmhe_solve_ms``: the logged ``nmhe_solve_ms`` output; ``estimate_times``:
+    the logged ``estimate_time`` (the instant each estimate refers to)."""
     out = {}
     if autonomy.HasSubsystemNamed("nmpc"):
         nmpc = autonomy.GetSubsystemByName("nmpc")
@@ -120,7 +121,7 @@ def control_estimation_metrics(
             nmpc_solve_ms_p95=float(np.percentile(solve_ms, 95)),
         )
     if autonomy.HasSubsystemNamed("nmhe"):
-        out.update(estimation_metrics(times, states, estimates, pose))
+        out.update(estimation_metrics(times, states, estimates, pose, estimate_times))
         nmhe = autonomy.GetSubsystemByName("nmhe")
         diag = nmhe.diagnostics(nmhe.GetMyContextFromRoot(context))
         ms = np.zeros(0) if nmhe_solve_ms is None else np.asarray(nmhe_solve_ms)
@@ -229,7 +230,13 @@ def run_mission(
     logged = ["ground_truth_state", "reference", "thrust_applied", "state_estimate"]
     logged += [
         p
-        for p in ("pose_measurement", "nmhe_solve_ms", "slam_pose", "explorer_status")
+        for p in (
+            "pose_measurement",
+            "nmhe_solve_ms",
+            "estimate_time",
+            "slam_pose",
+            "explorer_status",
+        )
         if vessel_diagram.HasOutputPort(p)
     ]
     loggers = {
@@ -309,6 +316,7 @@ def run_mission(
             logs["state_estimate"].data().T,
             logs["pose_measurement"].data().T if "pose_measurement" in logs else None,
             logs["nmhe_solve_ms"].data().ravel() if "nmhe_solve_ms" in logs else None,
+            logs["estimate_time"].data().ravel() if "estimate_time" in logs else None,
         )
     )
 

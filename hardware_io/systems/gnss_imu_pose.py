@@ -66,16 +66,7 @@ class GnssImuPose(LeafSystem):
         if fix.valid or fix.latitude != 0.0 or fix.longitude != 0.0:
             e, n, _ = self._frame.to_local(fix.latitude, fix.longitude, fix.altitude)
             x, y = float(e), float(n)
-        if not _is_default_imu(imu):
+        if not imu.is_empty():
             psi = quaternion_yaw(imu.orientation)
             r = float(imu.angular_velocity[2])
         output.SetFromVector([x, y, psi, r])
-
-
-def _is_default_imu(imu: ImuSample) -> bool:
-    return (
-        imu.time == 0.0
-        and not np.any(imu.angular_velocity)
-        and not np.any(imu.linear_acceleration)
-        and np.array_equal(imu.orientation, [0.0, 0.0, 0.0, 1.0])
-    )

@@ -9,6 +9,7 @@ reference through the mission's goals, thruster forces straight out).
 
 import functools
 import math
+from dataclasses import replace
 
 import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder
@@ -253,13 +254,31 @@ def make_autonomy(
     if scenario.estimator == "nmhe":
         from usvdrake.systems.estimation.nmhe_system import Nmhe
 
+        nmhe_cfg = scenario.nmhe
+        if "imu" in scenario.sensors.enabled:  # the NMHE's IMU model where the IMU sits
+            nmhe_cfg = replace(nmhe_cfg, imu_lever_arm=list(scenario.sensors.imu.lever_arm))
         nmhe = builder.AddNamedSystem(
-            "nmhe", Nmhe(vessel, scenario.nmhe, initial_state=scenario.initial_state)
+            "nmhe", Nmhe(vessel, nmhe_cfg, initial_state=scenario.initial_state)
         )
         builder.ExportInput(nmhe.GetInputPort("pose_measurement"), "pose_measurement")
         builder.ExportInput(nmhe.GetInputPort("thrust_measured"), "thrust_measured")
+        if "imu" in scenario.sensors.enabled:  # 000's NMHE with the IMU's interval means
+            from usvdrake.sensors.imu_interval import ImuIntervalMean
+
+            imu_mean = builder.AddNamedSystem(
+                "imu_interval_mean",
+                ImuIntervalMean(
+                    1.0 / nmhe_cfg.rate_hz,
+                    1.0 / scenario.sensors.imu.rate_hz,
+                    offset=0.5 * nmhe_cfg.update_offset,
+                ),
+            )
+            builder.ExportInput(imu_mean.GetInputPort("imu"), "imu")
+            builder.Connect(imu_mean.GetOutputPort("imu_mean"), nmhe.GetInputPort("imu_mean"))
+            builder.ExportOutput(imu_mean.GetOutputPort("imu_mean"), "imu_mean")
         builder.ExportOutput(nmhe.GetOutputPort("nmhe_failures"), "nmhe_failures")
         builder.ExportOutput(nmhe.GetOutputPort("nmhe_solve_ms"), "nmhe_solve_ms")
+        builder.ExportOutput(nmhe.GetOutputPort("estimate_time"), "estimate_time")
         estimate = nmhe.GetOutputPort("state_estimate")
         nmhe_force = nmhe.GetOutputPort("tau_env_estimate")
     elif scenario.estimator == "slam":  # 000 §V: the controllers use the SLAM's [x y ψ]

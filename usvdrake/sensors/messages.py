@@ -80,3 +80,13 @@ class ImuSample:
         default_factory=lambda: np.zeros(3)
     )  # [m/s^2] specific force
     orientation: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 0.0, 1.0]))  # xyzw
+
+    def is_empty(self) -> bool:
+        """True for the default value, which ports hold before the first sample arrives (a
+        real sample senses gravity, so its specific force is never all zero)."""
+        return (
+            self.time == 0.0
+            and not np.any(self.angular_velocity)
+            and not np.any(self.linear_acceleration)
+            and np.array_equal(self.orientation, [0.0, 0.0, 0.0, 1.0])
+        )

@@ -39,6 +39,9 @@ NX, HEADING = 6, 2
 class NmpcConfig:
     horizon: float = 4.0  # [s] prediction horizon N_c (000 §IV-B)
     dt: float = 0.1  # [s] shooting interval = control period (10 Hz, 000 §VI)
+    # [s] the update runs this long after the instants k·dt (the sensors'), after the
+    # estimator's (NMHE: 1 ms), so it acts on the state estimated from the samples just taken
+    update_offset: float = 0.002
     Wq: list[float] = field(
         default_factory=lambda: [200.0, 200.0, 100.0, 10.0, 10.0, 10.0]
     )  # eq. (11)
@@ -92,6 +95,10 @@ class NmpcProblem:
         if cfg.solver not in ("clarabel", "osqp"):
             raise ValueError(
                 f"NmpcProblem: solver must be 'clarabel' or 'osqp', got {cfg.solver!r}"
+            )
+        if not 0.0 <= cfg.update_offset < cfg.dt:
+            raise ValueError(
+                f"NmpcConfig.update_offset must be in [0, dt), got {cfg.update_offset}"
             )
         self.vessel, self.cfg = vessel, cfg
         self.xi = vessel.hydrodynamics

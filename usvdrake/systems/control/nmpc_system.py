@@ -47,7 +47,8 @@ class Nmpc(LeafSystem):
         - predicted_trajectory
         - nmpc_failures
 
-    Every dt seconds: sample the reference over the horizon, solve from the estimate with the
+    Every dt seconds, ``cfg.update_offset`` after the sensors sample (after the estimator's
+    update, see ``Nmhe``): sample the reference over the horizon, solve from the estimate with the
     previous plan (shifted) as warm start, hold the first input. A failed solve never stops the
     mission: the previous plan's next input is applied (the plan shifted again) and counted;
     after ``max_consecutive_failures`` failures in a row the command is zero thrust until a solve
@@ -76,7 +77,7 @@ class Nmpc(LeafSystem):
         self._u = self.DeclareDiscreteState(BasicVector(np.zeros(n_u)))
         self._mem = self.DeclareAbstractState(AbstractValue.Make(NmpcMemory()))
         self.DeclareInitializationUnrestrictedUpdateEvent(self._reset)
-        self.DeclarePeriodicUnrestrictedUpdateEvent(cfg.dt, 0.0, self._step)
+        self.DeclarePeriodicUnrestrictedUpdateEvent(cfg.dt, cfg.update_offset, self._step)
         self.DeclareStateOutputPort("thruster_command", self._u)
         self.DeclareAbstractOutputPort(
             "predicted_trajectory",

@@ -54,8 +54,8 @@ the dynamics are linearised with ``rk4_with_jacobians`` about (q̄_k, τ̃_k + b
 
     δq_{k+1} = A_k δq_k + B_k (e_k + δb) + (F(q̄_k, τ̃_k + b̄) − q̄_{k+1}),
 
-a sparse equality-constrained QP in (δq, e, δb) — 6M + 3(M−1) + 3 = 180 variables for M = 20,
-6(M−1) = 114 equalities, 3M bounds — built once in a ``MathematicalProgram`` and refilled with
+a sparse equality-constrained QP in (δq, e, δb, δb_a) — 6M + 3(M−1) + 3 + 2 = 182 variables for
+M = 20, 6(M−1) = 114 equalities, 3M bounds — built once in a ``MathematicalProgram`` and refilled with
 ``UpdateCoefficients`` / ``set_bounds`` each call, then solved by Clarabel (default) or OSQP.
 Deviations keep the numbers O(1) wherever the vessel is. The model is bilinear in the
 velocities and smooth in ψ, and the guess is one sample old, so one step per sample converges
@@ -64,6 +64,23 @@ velocities and smooth in ψ, and the guess is one sample old, so one step per sa
 p95 1.4-2.3 ms, same estimates to 1e-10. Both are far inside the 100 ms period; Clarabel is the
 default because an interior-point method's accuracy does not depend on the conditioning (the
 weights here span 0.1 to 10⁴) and needs no iteration limit.
+
+**IMU** (not in 000, whose z is pose and thrust only; used when an IMU feeds the window). Waves
+move a small boat at 0.3-1 Hz by a few cm/s but only ~1 cm, under the pose noise (σ = 2.2 cm):
+no estimator on poses alone can see that motion (river_tracking: u, v RMSE 0.041 m/s on poses,
+0.009 / 0.012 with the IMU). The IMU's readings, averaged over each interval (``ImuIntervalMean``,
+level frame), m_k = [f̄_x f̄_y ω̄_z], add
+
+        + Σ_k ‖m_k − h(q̂_k, q̂_{k+1}) − [b_a; 0]‖²_{R_imu} + ‖b_a − b̄_a‖²_{P_a}
+
+with h of :func:`imu_interval_model` (exact in ν_{k+1} − ν_k, trapezoid in the Coriolis and
+lever-arm products), R_imu = diag(σ_a, σ_a, σ_g)⁻² (``accel_std``, ``gyro_std``) and b_a the
+accelerometer's bias (turn-on ±0.002 g: 0.02 m/s², which would tilt the velocities across the
+window by 0.02 m/s), a slow variable like b with the prior b̄_a = its last estimate,
+P_a = ``accel_bias_std``⁻² per sample; the gyro's bias (±0.04 °/s) stays inside σ_g. Linearised
+about q̄ like the rest, each term touches δq_k, δq_{k+1} and δb_a only. With the IMU the
+unmodelled force d_k can be as large as the waves' (``disturbance_std`` of river_tracking:
+30 N, 30 N, 10 N m): the accelerometer, not the prior on d_k, now says what it was.
 
 **Arrival cost** (eq. 17, PL fixed): when a sample leaves the full window, the next prior q̄ is
 this solution's q̂_1, the estimate of the sample that becomes the first (:meth:`step`).
@@ -116,10 +133,20 @@ class NmheConfig:
     # 10 Hz controller update at the same instants); 0: it is the force over [t_k, t_{k+1})
     thrust_delay_samples: int = 1
     solver: str = "clarabel"  # "clarabel" or "osqp" (both ship with Drake)
-    # [samples] ``Nmhe`` holds the newest sample's estimate propagated this many dt: the newest
-    # sample is 1 dt old at an update and the output is read 1 dt later by systems updating at
-    # the same instants, so 2 gives them the state at the instant they read it (1: the update's)
-    output_lead_samples: int = 2
+    # [s] ``Nmhe`` updates this long after the instants k·dt at which its sensors sample (its
+    # compute slot, after the sensors' and before the controller's), so it reads the samples
+    # just taken; 0: at the same instants, when it reads the samples of the instant before
+    update_offset: float = 0.001
+    # [s] ``Nmhe`` holds the newest sample's estimate propagated this far: to the instant its
+    # consumer reads it (the NMPC's ``update_offset``; 2 dt with update_offset 0)
+    output_lead: float = 0.002
+    # IMU terms (used when an IMU feeds the window; see "IMU" in the module docstring)
+    accel_std: float = 0.01  # [m/s²] 1σ of an interval's mean level-frame specific force (x, y)
+    gyro_std: float = 0.002  # [rad/s] 1σ of an interval's mean yaw rate (noise + turn-on bias)
+    # [m/s²] 1σ of the accelerometer bias prior (last estimate) per sample; 0 = bias not learnt
+    accel_bias_std: float = 0.002
+    # [m] the IMU at (x fwd, y left) of the body origin (the autonomy copies sensors.imu's)
+    imu_lever_arm: list[float] = field(default_factory=lambda: [0.0, 0.0])
 
 
 @dataclass
@@ -131,6 +158,7 @@ class NmheSolution:
     thrust: np.ndarray  # û_k (M−1, n_u) estimated thruster commands [N, rad]
     disturbance: np.ndarray  # d̂_k (M−1, 3) estimated white unmodelled force [N, N, N m]
     bias: np.ndarray  # b̂ (3,) estimated slow unmodelled force [N, N, N m]
+    accel_bias: np.ndarray  # b̂_a (2,) estimated accelerometer bias [m/s²] (zero without IMU)
     success: bool  # the QP solved; if not, estimate/trajectory are the guess
     status: str  # the solver's result
     cost: float  # value of the linearised objective (15a + the d_k and b terms) [-]
@@ -148,6 +176,9 @@ class NmheWindow:
     prior: np.ndarray  # (6,) arrival-cost prior q̄ at the window's first valid sample
     bias: np.ndarray  # (3,) the last estimate of the slow force b [N, N, N m]
     count: int  # samples received, capped at M
+    # (M, 3) IMU interval means [f_x f_y ω_z], row k over [t_k, t_{k+1}); NaN = missing
+    imu: np.ndarray | None = None
+    accel_bias: np.ndarray | None = None  # (2,) the last accelerometer-bias estimate [m/s²]
 
 
 def _thrust_model(thrusters: list[Thruster], cmd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -170,6 +201,54 @@ def _thrust_model(thrusters: list[Thruster], cmd: np.ndarray) -> tuple[np.ndarra
     return tau, jac
 
 
+def imu_interval_model(
+    q0: np.ndarray, q1: np.ndarray, dt: float, lever_arm=(0.0, 0.0)
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What an IMU at ``lever_arm`` (l_x, l_y) [m] reads on average over intervals of length dt
+    that start at states q0 (N, 6) and end at q1 (N, 6): h (N, 3) = [f̄_x, f̄_y, ω̄_z] [m/s², m/s²,
+    rad/s] and the Jacobians ∂h/∂q0, ∂h/∂q1 (N, 3, 6).
+
+    The level-frame specific force of ``imu_model`` integrated over the interval: ∫ ν̇ dt is
+    exactly ν1 − ν0, and the products (r v, r u, r²) are averaged by the trapezoid rule, so
+
+        f̄_x = (u1 − u0)/dt − ½(r0 v0 + r1 v1) − l_y (r1 − r0)/dt − l_x ½(r0² + r1²)
+        f̄_y = (v1 − v0)/dt + ½(r0 u0 + r1 u1) + l_x (r1 − r0)/dt − l_y ½(r0² + r1²)
+        ω̄_z = ½(r0 + r1)
+
+    (trapezoid error (ω dt)²/12 of a component at angular frequency ω: 1.3 % for 0.6 Hz waves
+    at dt = 0.1 s)."""
+    lx, ly = float(lever_arm[0]), float(lever_arm[1])
+    q0, q1 = np.atleast_2d(q0), np.atleast_2d(q1)
+    u0, v0, r0 = q0[:, 3], q0[:, 4], q0[:, 5]
+    u1, v1, r1 = q1[:, 3], q1[:, 4], q1[:, 5]
+    h = np.stack(
+        [
+            (u1 - u0) / dt
+            - 0.5 * (r0 * v0 + r1 * v1)
+            - ly * (r1 - r0) / dt
+            - lx * 0.5 * (r0 * r0 + r1 * r1),
+            (v1 - v0) / dt
+            + 0.5 * (r0 * u0 + r1 * u1)
+            + lx * (r1 - r0) / dt
+            - ly * 0.5 * (r0 * r0 + r1 * r1),
+            0.5 * (r0 + r1),
+        ],
+        axis=1,
+    )
+    jac = []
+    for sign, u, v, r in ((-1.0, u0, v0, r0), (1.0, u1, v1, r1)):
+        j = np.zeros((len(u), 3, 6))
+        j[:, 0, 3] = sign / dt
+        j[:, 0, 4] = -0.5 * r
+        j[:, 0, 5] = -0.5 * v - sign * ly / dt - lx * r
+        j[:, 1, 3] = 0.5 * r
+        j[:, 1, 4] = sign / dt
+        j[:, 1, 5] = 0.5 * u + sign * lx / dt - ly * r
+        j[:, 2, 5] = 0.5
+        jac.append(j)
+    return h, jac[0], jac[1]
+
+
 class NmheProblem:
     """Reusable NMHE QP for one vessel (see the module docstring for the formulation).
 
@@ -184,8 +263,12 @@ class NmheProblem:
             raise ValueError(f"NmheConfig.horizon must be >= 2 samples, got {cfg.horizon}")
         if cfg.rate_hz <= 0:
             raise ValueError(f"NmheConfig.rate_hz must be positive, got {cfg.rate_hz}")
-        if cfg.output_lead_samples < 0:
-            raise ValueError(f"NmheConfig.output_lead_samples must be >= 0, got {cfg}")
+        if not 0.0 <= cfg.update_offset < 1.0 / cfg.rate_hz:
+            raise ValueError(
+                f"NmheConfig.update_offset must be in [0, 1/rate_hz), got {cfg.update_offset}"
+            )
+        if not (np.isfinite(cfg.output_lead) and cfg.output_lead >= 0):
+            raise ValueError(f"NmheConfig.output_lead must be >= 0, got {cfg.output_lead}")
         if cfg.thrust_delay_samples not in (0, 1):
             raise ValueError(
                 f"NmheConfig.thrust_delay_samples must be 0 or 1, got {cfg.thrust_delay_samples}"
@@ -201,6 +284,13 @@ class NmheProblem:
             if not ok:
                 sign = ">= 0" if zero_ok else "> 0"
                 raise ValueError(f"NmheConfig.{name} needs {n} finite numbers {sign}, got {v}")
+        for name in ("accel_std", "gyro_std"):
+            if not (np.isfinite(getattr(cfg, name)) and getattr(cfg, name) > 0):
+                raise ValueError(f"NmheConfig.{name} must be > 0, got {getattr(cfg, name)}")
+        if not (np.isfinite(cfg.accel_bias_std) and cfg.accel_bias_std >= 0):
+            raise ValueError(f"NmheConfig.accel_bias_std must be >= 0, got {cfg.accel_bias_std}")
+        if np.shape(cfg.imu_lever_arm) != (2,) or not np.all(np.isfinite(cfg.imu_lever_arm)):
+            raise ValueError(f"NmheConfig.imu_lever_arm needs 2 numbers, got {cfg.imu_lever_arm}")
         lo, hi = np.asarray(cfg.velocity_min, float), np.asarray(cfg.velocity_max, float)
         if lo.shape != (3,) or hi.shape != (3,) or not np.all(lo < hi):
             raise ValueError(f"NmheConfig: need velocity_min < velocity_max (3 each), got {cfg}")
@@ -225,16 +315,21 @@ class NmheProblem:
             [1.0 / sd**2 if on else 0.0 for sd, on in zip(bias_std, self._bias_on, strict=True)]
         )
         self._v_lo, self._v_hi = lo, hi
+        self._w_imu = 1.0 / np.square([cfg.accel_std, cfg.accel_std, cfg.gyro_std])
+        self._accel_bias_on = cfg.accel_bias_std > 0
+        self._p_ba = 1.0 / cfg.accel_bias_std**2 if self._accel_bias_on else 0.0
 
-        # x = [δq_0 … δq_{M−1} (6M), e_0 … e_{M−2} (3(M−1)), δb (3)]
+        # x = [δq_0 … δq_{M−1} (6M), e_0 … e_{M−2} (3(M−1)), δb (3), δb_a (2)]
         self._i_e = 6 * M
         self._i_b = self._i_e + 3 * (M - 1)
-        self._n = n = self._i_b + 3
+        self._i_ba = self._i_b + 3
+        self._n = n = self._i_ba + 2
         self._prog = MathematicalProgram()
         self._dq = self._prog.NewContinuousVariables(M, 6, "dq")
         self._e = self._prog.NewContinuousVariables(M - 1, 3, "e")
         self._db = self._prog.NewContinuousVariables(3, "db")
-        x = np.concatenate([self._dq.ravel(), self._e.ravel(), self._db])
+        self._dba = self._prog.NewContinuousVariables(2, "dba")
+        x = np.concatenate([self._dq.ravel(), self._e.ravel(), self._db, self._dba])
         self._cost = self._prog.AddQuadraticCost(np.eye(n), np.zeros(n), x, is_convex=True)
         self._rows, self._cols = self._dynamics_pattern()
         a0 = sp.csc_matrix(
@@ -247,6 +342,7 @@ class NmheProblem:
         self._bias_box = self._prog.AddBoundingBoxConstraint(
             np.where(self._bias_on, -np.inf, 0.0), np.where(self._bias_on, np.inf, 0.0), self._db
         )
+        self._accel_bias_box = self._prog.AddBoundingBoxConstraint(0.0, 0.0, self._dba)
         if cfg.solver == "clarabel":
             self._solver = ClarabelSolver()
         elif cfg.solver == "osqp":
@@ -269,6 +365,45 @@ class NmheProblem:
                 np.tile(self._i_b + i3, 6),
             ]
         return np.concatenate(rows), np.concatenate(cols)
+
+    def _add_imu_terms(
+        self,
+        hess: np.ndarray,
+        grad: np.ndarray,
+        imu: np.ndarray,
+        q_bar: np.ndarray,
+        ba_bar: np.ndarray,
+    ) -> float:
+        """Adds Σ_k ‖m_k − h(q_k, q_{k+1}) − [b_a; 0]‖²_{R_imu} + ‖b_a − b̄_a‖²_{P_a}, linearised
+        about q̄ and b̄_a, to the cost ½ xᵀ H x + gᵀ x (in place) and returns its constant."""
+        const = 0.0
+        have = np.isfinite(imu)
+        if have.any():
+            M = self.M
+            h, j0, j1 = imu_interval_model(q_bar[:-1], q_bar[1:], self.dt, self.cfg.imu_lever_arm)
+            w = np.where(have, self._w_imu, 0.0)  # (M − 1, 3)
+            rho = np.where(have, imu, 0.0) - h
+            rho[:, :2] -= ba_bar
+            rho = np.where(have, rho, 0.0)
+            # J_k on [δq_k, δq_{k+1}] (contiguous, 12 wide) and [δb_a] (2 wide)
+            jq = np.concatenate([j0, j1], axis=2)  # (M − 1, 3, 12)
+            jb = np.zeros((M - 1, 3, 2))
+            jb[:, 0, 0] = jb[:, 1, 1] = 1.0
+            wjq = w[:, :, None] * jq
+            wjb = w[:, :, None] * jb
+            ib = slice(self._i_ba, self._i_ba + 2)
+            for k in range(M - 1):
+                iq = slice(6 * k, 6 * k + 12)
+                hess[iq, iq] += 2.0 * jq[k].T @ wjq[k]
+                hess[iq, ib] += 2.0 * jq[k].T @ wjb[k]
+                hess[ib, iq] += 2.0 * jb[k].T @ wjq[k]
+                hess[ib, ib] += 2.0 * jb[k].T @ wjb[k]
+                grad[iq] -= 2.0 * wjq[k].T @ rho[k]
+                grad[ib] -= 2.0 * wjb[k].T @ rho[k]
+            const += float(np.sum(w * rho * rho))
+        ib = slice(self._i_ba, self._i_ba + 2)
+        hess[ib, ib] += 2.0 * self._p_ba * np.eye(2)  # prior ‖δb_a‖²_{P_a} (zero when off)
+        return const
 
     def thrust_to_tau(self, commands: np.ndarray) -> np.ndarray:
         """τ (N, 3) [N, N, N m] of thruster commands (N, n_u)."""
@@ -293,6 +428,8 @@ class NmheProblem:
             prior=np.zeros(6),
             bias=np.zeros(3),
             count=0,
+            imu=np.full((self.M, 3), np.nan),
+            accel_bias=np.zeros(2),
         )
 
     def step(
@@ -301,9 +438,12 @@ class NmheProblem:
         z_new: np.ndarray,
         u_new: np.ndarray,
         initial_state: np.ndarray | None = None,
+        imu_new: np.ndarray | None = None,
     ) -> tuple[NmheWindow, NmheSolution]:
         """Push one sample — pose [x y ψ r] [m, m, rad, rad/s] and thrust reading [N, rad] (see
         ``thrust_delay_samples``) — into the window and solve; ``window`` is not modified.
+        ``imu_new``: the IMU's mean [f_x f_y ω_z] [m/s², m/s², rad/s] over the interval that
+        ends at this pose sample (``ImuIntervalMean``), None or NaN when there is none.
 
         Arrival cost (eq. 17, PL fixed): when a sample leaves the full window, the prior for the
         new first sample is the last solution's estimate of that sample (its q̂_1); while the
@@ -320,6 +460,10 @@ class NmheProblem:
         u[M - 1] = u_new
         if self.cfg.thrust_delay_samples == 1:
             u[M - 2] = u_new
+        imu = np.full((M, 3), np.nan) if window.imu is None else np.roll(window.imu, -1, axis=0)
+        imu[M - 1] = np.nan
+        imu[M - 2] = np.nan if imu_new is None else np.array(imu_new, float).reshape(3)
+        accel_bias = np.zeros(2) if window.accel_bias is None else window.accel_bias
         if window.count == 0 and not np.isfinite(z_new).any():
             return window, self._no_solution(window.trajectory, np.nan_to_num(u[: M - 1]))
         if window.count == 0:
@@ -337,17 +481,30 @@ class NmheProblem:
         z[M - 1] = z_new
         count = min(window.count + 1, M)
         if not np.isfinite(z).any():  # every pose in the window lost: coast on the model
-            sol = self._no_solution(guess, np.nan_to_num(u[: M - 1]), window.bias)
-            return NmheWindow(z, u, guess, prior, window.bias, count), sol
-        # b is learnt only from full windows: while the window fills, the velocities are still
-        # poorly known and b would absorb the start-up error (and forget it slowly).
+            sol = self._no_solution(guess, np.nan_to_num(u[: M - 1]), window.bias, accel_bias)
+            return NmheWindow(z, u, guess, prior, window.bias, count, imu, accel_bias), sol
+        # b and b_a are learnt only from full windows: while the window fills, the velocities
+        # are still poorly known and would be absorbed as a force (and forgotten slowly).
         sol = self.solve(
-            z, u, prior, guess, window.bias, fix_bias=count < M, arrival_index=M - count
+            z,
+            u,
+            prior,
+            guess,
+            window.bias,
+            fix_bias=count < M,
+            arrival_index=M - count,
+            imu_window=imu,
+            accel_bias_prior=accel_bias,
         )
-        return NmheWindow(z, u, sol.trajectory, prior, sol.bias, count), sol
+        window = NmheWindow(z, u, sol.trajectory, prior, sol.bias, count, imu, sol.accel_bias)
+        return window, sol
 
     def _no_solution(
-        self, trajectory: np.ndarray, cmd: np.ndarray, bias: np.ndarray | None = None
+        self,
+        trajectory: np.ndarray,
+        cmd: np.ndarray,
+        bias: np.ndarray | None = None,
+        accel_bias: np.ndarray | None = None,
     ) -> NmheSolution:
         return NmheSolution(
             estimate=trajectory[-1].copy(),
@@ -355,6 +512,7 @@ class NmheProblem:
             thrust=cmd,
             disturbance=np.zeros((self.M - 1, 3)),
             bias=np.zeros(3) if bias is None else bias.copy(),
+            accel_bias=np.zeros(2) if accel_bias is None else accel_bias.copy(),
             success=False,
             status="NoMeasurement",
             cost=float("nan"),
@@ -371,6 +529,8 @@ class NmheProblem:
         bias_prior: np.ndarray | None = None,
         fix_bias: bool = False,
         arrival_index: int | None = None,
+        imu_window: np.ndarray | None = None,
+        accel_bias_prior: np.ndarray | None = None,
     ) -> NmheSolution:
         """One NMHE step (eqs. 15-17): the QP linearised about ``guess``, solved once.
 
@@ -382,8 +542,12 @@ class NmheProblem:
         guess: (M, 6) linearisation trajectory (the previous solution shifted); default: the
             prior rolled out with the measured thrust.
         bias_prior: b̄ (3,) [N, N, N m], the slow force's prior; default zero.
-        fix_bias: hold b at b̄ instead of estimating it.
+        fix_bias: hold b (and b_a) at their priors instead of estimating them.
         arrival_index: the sample p the prior belongs to; default: the first holding a pose.
+        imu_window: (M − 1, 3) or (M, 3) IMU interval means [f_x f_y ω_z] [m/s², m/s², rad/s],
+            row k over [t_k, t_{k+1}) (a row M − 1 is ignored); NaN entries = missing; None: no
+            IMU.
+        accel_bias_prior: b̄_a (2,) [m/s²], the accelerometer bias's prior; default zero.
         """
         t_start = time.perf_counter()
         M, n_u, n = self.M, self.n_u, self._n
@@ -397,8 +561,19 @@ class NmheProblem:
         prior = np.array(prior, float).reshape(6)
         b_bar = np.zeros(3) if bias_prior is None else np.array(bias_prior, float).reshape(3)
         b_bar = np.where(self._bias_on, b_bar, 0.0)
-        if not (np.all(np.isfinite(prior)) and np.all(np.isfinite(b_bar))):
-            raise ValueError(f"NmheProblem.solve: priors must be finite, got {prior}, {b_bar}")
+        ba_bar = np.zeros(2) if accel_bias_prior is None else np.array(accel_bias_prior, float)
+        ba_bar = ba_bar.reshape(2) if self._accel_bias_on else np.zeros(2)
+        if not all(np.all(np.isfinite(v)) for v in (prior, b_bar, ba_bar)):
+            raise ValueError(
+                f"NmheProblem.solve: priors must be finite, got {prior}, {b_bar}, {ba_bar}"
+            )
+        if imu_window is None:
+            imu = np.full((M - 1, 3), np.nan)
+        else:
+            imu = np.array(imu_window, float)
+            if imu.ndim != 2 or imu.shape[1] != 3 or imu.shape[0] not in (M - 1, M):
+                raise ValueError(f"NmheProblem.solve: imu_window must be ({M}, 3), got {imu.shape}")
+            imu = imu[: M - 1]
 
         # Measurement weights; missing entries weigh nothing.
         have = np.isfinite(z)
@@ -459,8 +634,9 @@ class NmheProblem:
         for k in range(M - 1):
             e = slice(self._i_e + 3 * k, self._i_e + 3 * k + 3)
             hess[e, e] = 2.0 * s_inv[k]
-        hess[self._i_b :, self._i_b :] = 2.0 * self._p_b
+        hess[self._i_b : self._i_ba, self._i_b : self._i_ba] = 2.0 * self._p_b
         const = float(np.sum(w * rho * rho) + dp @ self._p_l @ dp)
+        const += self._add_imu_terms(hess, grad, imu, q_bar, ba_bar)
         self._cost.evaluator().UpdateCoefficients(hess, grad, const, True)
 
         # Bounds (15c) on (u, v, r), in deviations from the guess; δb = 0 where b is held.
@@ -471,6 +647,9 @@ class NmheProblem:
         self._bias_box.evaluator().set_bounds(
             np.where(free, -np.inf, 0.0), np.where(free, np.inf, 0.0)
         )
+        free_a = self._accel_bias_on and not fix_bias and bool(np.isfinite(imu[:, :2]).any())
+        lim = np.inf if free_a else 0.0
+        self._accel_bias_box.evaluator().set_bounds(np.full(2, -lim), np.full(2, lim))
 
         result = self._solver.Solve(self._prog)
         status = str(result.get_solution_result())
@@ -481,6 +660,7 @@ class NmheProblem:
                 thrust=cmd,
                 disturbance=np.zeros((M - 1, 3)),
                 bias=b_bar,
+                accel_bias=ba_bar,
                 success=False,
                 status=status,
                 cost=float("nan"),
@@ -495,6 +675,7 @@ class NmheProblem:
             thrust=cmd + var * np.einsum("kji,kj->ki", jac, se),
             disturbance=se @ self._q_d.T,
             bias=b_bar + np.where(free, result.GetSolution(self._db), 0.0),
+            accel_bias=ba_bar + (result.GetSolution(self._dba) if free_a else 0.0),
             success=True,
             status=status,
             cost=float(result.get_optimal_cost()),

@@ -22,30 +22,36 @@ class Nmhe(LeafSystem):
         input_ports:
         - pose_measurement
         - thrust_measured
+        - imu_mean (optional)
         output_ports:
         - state_estimate
         - tau_env_estimate
         - nmhe_failures
         - nmhe_solve_ms
+        - estimate_time
 
     ``pose_measurement`` = [x y ψ r] [m, m, rad, rad/s] (``PoseSensor``; ψ may be wrapped);
     ``thrust_measured``: the thruster command layout [N, rad] (``ThrustSensor``).
+    ``imu_mean`` = [f̄_x f̄_y ω̄_z t_end] (``ImuIntervalMean`` at ``cfg.rate_hz``): when
+    connected, the IMU's mean over the interval that ends at the newest pose sample enters the
+    window (see "IMU" in ``nmhe_problem``); a mean of another interval, or NaN, is missing.
     ``state_estimate`` = q̂ [m, m, rad, m/s, m/s, rad/s], held (see Timing; ψ̂ continuous,
     unwrapped); ``tau_env_estimate`` = b̂ [N, N, N m], the slow unmodelled body force
     the estimator has learnt (wind, current drag, model error); ``nmhe_failures``: failed solves
     so far; ``nmhe_solve_ms``: wall time of the last update [ms] (log it for statistics).
 
-    **Timing.** A periodic discrete update every dt = 1 / ``cfg.rate_hz`` from t = 0, the
-    instants at which the sensors sample (their rates must equal ``cfg.rate_hz``; periodic
-    events of equal period and offset fall at bitwise-equal times, so they are simultaneous).
-    Drake applies simultaneous discrete updates together: the update at t_k reads the samples
-    held since t_{k−1}, and the first event (t_0) sees no sample yet and only starts the clock.
-    (An offset of dt instead would race the sensors: k·dt and dt + (k−1)·dt differ in the last
-    bit, and the estimator read some samples twice and skipped others.) The output
-    is the newest sample's estimate propagated ``cfg.output_lead_samples`` · dt (default 2: the
-    state at t_{k+1}, when a controller or logger updating at the same instants reads it) by
-    RK4 of eq. (7) with the newest thrust reading held and b̂. Before the first solve the
-    output is ``initial_state`` (or zero).
+    **Timing.** The sensors sample at t_k = k dt (dt = 1 / ``cfg.rate_hz``; their rates must
+    equal it). A periodic discrete update every dt at ``cfg.update_offset`` (default 1 ms, the
+    estimator's compute slot) reads the samples just taken at t_k, and a controller updating
+    at its own offset after that (the NMPC's 2 ms) reads this estimate: the loop's latency is
+    the compute slots, as on the boat, not whole periods. With update_offset 0 the update is
+    simultaneous with the sensors' and Drake gives it the samples of t_{k−1} (simultaneous
+    discrete updates read the old state; the first event only starts the clock). The output
+    ``state_estimate`` is the newest sample's estimate propagated ``cfg.output_lead`` [s] (to
+    when its consumer reads it) by RK4 of eq. (7) with the newest thrust reading held and b̂;
+    ``estimate_time`` [s] is the instant it refers to (newest sample + lead), for scoring it
+    against the truth. Before the first solve the output is ``initial_state`` (or zero) at
+    t = 0.
 
     **State.** The window (poses, thrust readings, last trajectory, arrival prior, b̂, sample
     count), the estimate and the diagnostics are discrete state in the Context; the
@@ -71,16 +77,21 @@ class Nmhe(LeafSystem):
         empty = p.empty_window()
         self._pose = self.DeclareVectorInputPort("pose_measurement", 4)
         self._thrust = self.DeclareVectorInputPort("thrust_measured", p.n_u)
+        self._imu_mean = self.DeclareVectorInputPort("imu_mean", 4)
         self._z = self.DeclareDiscreteState(BasicVector(empty.z.ravel()))
         self._u = self.DeclareDiscreteState(BasicVector(empty.u.ravel()))
         self._traj = self.DeclareDiscreteState(BasicVector(empty.trajectory.ravel()))
-        # [prior q̄ (6), b̂ (3), sample count]
-        self._mem = self.DeclareDiscreteState(BasicVector(np.zeros(10)))
+        self._imu = self.DeclareDiscreteState(BasicVector(empty.imu.ravel()))
+        # [prior q̄ (6), b̂ (3), sample count, b̂_a (2)]
+        self._mem = self.DeclareDiscreteState(BasicVector(np.zeros(12)))
         q0 = np.zeros(6) if self._initial_state is None else self._initial_state
         self._est = self.DeclareDiscreteState(BasicVector(q0))
         self._diag = self.DeclareDiscreteState(BasicVector(np.zeros(6)))
-        self._lead = p.cfg.output_lead_samples * p.dt
-        self.DeclarePeriodicDiscreteUpdateEvent(p.dt, 0.0, self._update)
+        self._est_time = self.DeclareDiscreteState(BasicVector([0.0]))
+        self._lead = p.cfg.output_lead
+        # at offset 0 the samples read are one period old (see Timing)
+        self._sample_age = p.cfg.update_offset if p.cfg.update_offset > 0 else p.dt
+        self.DeclarePeriodicDiscreteUpdateEvent(p.dt, p.cfg.update_offset, self._update)
         self.DeclareStateOutputPort("state_estimate", self._est)
         mem_ticket = {self.discrete_state_ticket(self._mem)}
         diag_ticket = {self.discrete_state_ticket(self._diag)}
@@ -93,6 +104,7 @@ class Nmhe(LeafSystem):
         self.DeclareVectorOutputPort(
             "nmhe_solve_ms", 1, self._calc_solve_ms, prerequisites_of_calc=diag_ticket
         )
+        self.DeclareStateOutputPort("estimate_time", self._est_time)
 
     @property
     def problem(self) -> NmheProblem:
@@ -109,6 +121,8 @@ class Nmhe(LeafSystem):
             prior=mem[:6],
             bias=mem[6:9],
             count=int(mem[9]),
+            imu=context.get_discrete_state(self._imu).CopyToVector().reshape(M, 3),
+            accel_bias=mem[10:12],
         )
 
     def diagnostics(self, context) -> dict:
@@ -127,27 +141,37 @@ class Nmhe(LeafSystem):
         p = self._problem
         d = context.get_discrete_state(self._diag).CopyToVector()
         d[DIAG_EVENTS] += 1
-        if d[DIAG_EVENTS] == 1:  # t_0: the sensors are taking their first sample right now
+        if d[DIAG_EVENTS] == 1 and p.cfg.update_offset == 0:  # t_0: no sample held yet
             discrete_state.get_mutable_vector(self._diag).SetFromVector(d)
             return
         window = self.window(context)
         z_new = self._pose.Eval(context)
         u_new = self._thrust.Eval(context)
+        imu_new = None
+        if self._imu_mean.HasValue(context):
+            m = self._imu_mean.Eval(context)
+            # the mean over the interval that ends at the newest pose sample, or none
+            if abs(m[3] - (context.get_time() - self._sample_age)) < 0.5 * p.dt:
+                imu_new = m[:3]
         estimate = context.get_discrete_state(self._est).CopyToVector()
+        est_time = context.get_discrete_state(self._est_time).GetAtIndex(0)
         t_start = time.perf_counter()
         try:
-            window, sol = p.step(window, z_new, u_new, self._initial_state)
+            window, sol = p.step(window, z_new, u_new, self._initial_state, imu_new)
             ok = sol.success
             estimate = p.predict(sol.estimate, window.u[-1], self._lead, window.bias)
+            est_time = context.get_time() - self._sample_age + self._lead
         except (RuntimeError, ValueError, np.linalg.LinAlgError):
             # Keep the last estimate propagated and start a fresh window from the next sample.
             ok = False
             window = p.empty_window()
             estimate = p.predict(estimate, u_new, p.dt)  # the held output, one period on
+            est_time += p.dt
         ms = 1e3 * (time.perf_counter() - t_start)
         if not np.all(np.isfinite(estimate)):
             ok, window = False, p.empty_window()
             estimate = context.get_discrete_state(self._est).CopyToVector()
+            est_time = context.get_discrete_state(self._est_time).GetAtIndex(0)
         d[DIAG_FAILURES] += 0 if ok else 1
         d[DIAG_SOLVES] += 1
         d[DIAG_LAST_MS] = ms
@@ -156,10 +180,12 @@ class Nmhe(LeafSystem):
         discrete_state.get_mutable_vector(self._z).SetFromVector(window.z.ravel())
         discrete_state.get_mutable_vector(self._u).SetFromVector(window.u.ravel())
         discrete_state.get_mutable_vector(self._traj).SetFromVector(window.trajectory.ravel())
+        discrete_state.get_mutable_vector(self._imu).SetFromVector(window.imu.ravel())
         discrete_state.get_mutable_vector(self._mem).SetFromVector(
-            np.concatenate([window.prior, window.bias, [window.count]])
+            np.concatenate([window.prior, window.bias, [window.count], window.accel_bias])
         )
         discrete_state.get_mutable_vector(self._est).SetFromVector(estimate)
+        discrete_state.get_mutable_vector(self._est_time).SetFromVector([est_time])
         discrete_state.get_mutable_vector(self._diag).SetFromVector(d)
 
     def _calc_bias(self, context, output):
