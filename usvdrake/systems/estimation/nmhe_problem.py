@@ -56,8 +56,8 @@ the dynamics are linearised with ``rk4_with_jacobians`` about (q̄_k, τ̃_k + b
 
 a sparse equality-constrained QP in (δq, e, δb, δb_a) — 6M + 3(M−1) + 3 + 2 = 182 variables
 for M = 20, 6(M−1) = 114 equalities, 3M bounds — built once in a ``MathematicalProgram`` and
-refilled with ``UpdateCoefficients`` / ``set_bounds`` each call, then solved by Clarabel (default) or OSQP.
-Deviations keep the numbers O(1) wherever the vessel is. The model is bilinear in the
+refilled with ``UpdateCoefficients`` / ``set_bounds`` each call, then solved by Clarabel
+(default) or OSQP. Deviations keep the numbers O(1) wherever the vessel is. The model is bilinear in the
 velocities and smooth in ψ, and the guess is one sample old, so one step per sample converges
 (noiseless data: error < 1e-4 once the window is full). Solvers, measured on this 2-core machine
 (M = 20, Roboat II, whole call): Clarabel median 1.5 ms, p95 1.7-3 ms; OSQP median 1.2-1.3 ms,
