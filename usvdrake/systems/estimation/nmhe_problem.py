@@ -54,17 +54,17 @@ the dynamics are linearised with ``rk4_with_jacobians`` about (q̄_k, τ̃_k + b
 
     δq_{k+1} = A_k δq_k + B_k (e_k + δb) + (F(q̄_k, τ̃_k + b̄) − q̄_{k+1}),
 
-a sparse equality-constrained QP in (δq, e, δb, δb_a) — 6M + 3(M−1) + 3 + 2 = 182 variables
-for M = 20, 6(M−1) = 114 equalities, 3M bounds — built once in a ``MathematicalProgram`` and
-refilled with ``UpdateCoefficients`` / ``set_bounds`` each call, then solved by Clarabel
-(default) or OSQP. Deviations keep the numbers O(1) wherever the vessel is. The model is bilinear in the
-velocities and smooth in ψ, and the guess is one sample old, so one step per sample converges
-(noiseless data: error < 1e-4 once the window is full). Solvers, measured on this 2-core machine
-(M = 20, Roboat II, whole call): Clarabel median 1.5 ms, p95 1.7-3 ms; OSQP median 1.2-1.3 ms,
-p95 1.4-2.3 ms, same estimates to 1e-10 (pose and thrust only; with the IMU terms river_tracking
-measures 3.0 ms median, 8.5 ms max). Both are far inside the 100 ms period; Clarabel is the
-default because an interior-point method's accuracy does not depend on the conditioning (the
-weights here span 0.1 to 10⁴) and needs no iteration limit.
+a sparse equality-constrained QP in (δq, e, δb, δb_a) — 6M + 3(M−1) + 3 + 2 = 182 variables for M =
+20, 6(M−1) = 114 equalities, 3M bounds — built once in a ``MathematicalProgram`` and refilled with
+``UpdateCoefficients`` / ``set_bounds`` each call, then solved by Clarabel (default) or OSQP.
+Deviations keep the numbers O(1) wherever the vessel is. The model is bilinear in the velocities and
+smooth in ψ, and the guess is one sample old, so one step per sample converges (noiseless data:
+error < 1e-4 once the window is full). Solvers, measured on this 2-core machine (M = 20, Roboat II,
+whole call): Clarabel median 1.5 ms, p95 1.7-3 ms; OSQP median 1.2-1.3 ms, p95 1.4-2.3 ms, same
+estimates to 1e-10 (pose and thrust only; with the IMU terms river_tracking measures 3.0 ms median,
+8.5 ms max). Both are far inside the 100 ms period; Clarabel is the default because an
+interior-point method's accuracy does not depend on the conditioning (the weights here span 0.1 to
+10⁴) and needs no iteration limit.
 
 **IMU** (not in 000, whose z is pose and thrust only; used when an IMU feeds the window). Waves
 move a small boat at 0.3-1 Hz by a few cm/s but only ~1 cm, under the pose noise (σ = 2.2 cm):
