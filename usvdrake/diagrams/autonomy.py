@@ -255,14 +255,15 @@ def make_autonomy(
         from usvdrake.systems.estimation.nmhe_system import Nmhe
 
         nmhe_cfg = scenario.nmhe
-        if "imu" in scenario.sensors.enabled:  # the NMHE's IMU model where the IMU sits
+        with_imu = "imu" in scenario.sensors.enabled
+        if with_imu:  # the NMHE's IMU model where the IMU sits
             nmhe_cfg = replace(nmhe_cfg, imu_lever_arm=list(scenario.sensors.imu.lever_arm))
         nmhe = builder.AddNamedSystem(
             "nmhe", Nmhe(vessel, nmhe_cfg, initial_state=scenario.initial_state)
         )
         builder.ExportInput(nmhe.GetInputPort("pose_measurement"), "pose_measurement")
         builder.ExportInput(nmhe.GetInputPort("thrust_measured"), "thrust_measured")
-        if "imu" in scenario.sensors.enabled:  # 000's NMHE with the IMU's interval means
+        if with_imu:  # 000's NMHE with the IMU's interval means
             from usvdrake.sensors.imu_interval import ImuIntervalMean
 
             imu_mean = builder.AddNamedSystem(
@@ -275,7 +276,6 @@ def make_autonomy(
             )
             builder.ExportInput(imu_mean.GetInputPort("imu"), "imu")
             builder.Connect(imu_mean.GetOutputPort("imu_mean"), nmhe.GetInputPort("imu_mean"))
-            builder.ExportOutput(imu_mean.GetOutputPort("imu_mean"), "imu_mean")
         builder.ExportOutput(nmhe.GetOutputPort("nmhe_failures"), "nmhe_failures")
         builder.ExportOutput(nmhe.GetOutputPort("nmhe_solve_ms"), "nmhe_solve_ms")
         builder.ExportOutput(nmhe.GetOutputPort("estimate_time"), "estimate_time")

@@ -61,8 +61,8 @@ Deviations keep the numbers O(1) wherever the vessel is. The model is bilinear i
 smooth in ψ, and the guess is one sample old, so one step per sample converges (noiseless data:
 error < 1e-4 once the window is full). Solvers, measured on this 2-core machine (M = 20, Roboat II,
 whole call): Clarabel median 1.5 ms, p95 1.7-3 ms; OSQP median 1.2-1.3 ms, p95 1.4-2.3 ms, same
-estimates to 1e-10 (pose and thrust only; with the IMU terms river_tracking measures 3.0 ms median,
-8.5 ms max). Both are far inside the 100 ms period; Clarabel is the default because an
+estimates to 1e-10 (pose and thrust only; with the IMU terms river_tracking measures 2.5 ms median,
+4.2 ms max). Both are far inside the 100 ms period; Clarabel is the default because an
 interior-point method's accuracy does not depend on the conditioning (the weights here span 0.1 to
 10⁴) and needs no iteration limit.
 
@@ -177,9 +177,8 @@ class NmheWindow:
     prior: np.ndarray  # (6,) arrival-cost prior q̄ at the window's first valid sample
     bias: np.ndarray  # (3,) the last estimate of the slow force b [N, N, N m]
     count: int  # samples received, capped at M
-    # (M, 3) IMU interval means [f_x f_y ω_z], row k over [t_k, t_{k+1}); NaN = missing
-    imu: np.ndarray | None = None
-    accel_bias: np.ndarray | None = None  # (2,) the last accelerometer-bias estimate [m/s²]
+    imu: np.ndarray  # (M, 3) IMU means [f_x f_y ω_z], row k over [t_k, t_{k+1}); NaN = missing
+    accel_bias: np.ndarray  # (2,) the last accelerometer-bias estimate [m/s²]
 
 
 def _thrust_model(thrusters: list[Thruster], cmd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -388,20 +387,22 @@ class NmheProblem:
             rho = np.where(have, imu, 0.0) - h
             rho[:, :2] -= ba_bar
             rho = np.where(have, rho, 0.0)
-            # J_k on [δq_k, δq_{k+1}] (contiguous, 12 wide) and [δb_a] (2 wide)
+            # J_k = [∂h/∂q_k, ∂h/∂q_{k+1}] on δq_k, δq_{k+1} (contiguous, 12 wide) and the
+            # identity on δb_a (rows f_x, f_y); the blocks of consecutive k overlap, so they are
+            # accumulated with np.add.at
             jq = np.concatenate([j0, j1], axis=2)  # (M − 1, 3, 12)
-            jb = np.zeros((M - 1, 3, 2))
-            jb[:, 0, 0] = jb[:, 1, 1] = 1.0
             wjq = w[:, :, None] * jq
-            wjb = w[:, :, None] * jb
-            for k in range(M - 1):
-                iq = slice(6 * k, 6 * k + 12)
-                hess[iq, iq] += 2.0 * jq[k].T @ wjq[k]
-                hess[iq, ib] += 2.0 * jq[k].T @ wjb[k]
-                hess[ib, iq] += 2.0 * jb[k].T @ wjq[k]
-                hess[ib, ib] += 2.0 * jb[k].T @ wjb[k]
-                grad[iq] -= 2.0 * wjq[k].T @ rho[k]
-                grad[ib] -= 2.0 * wjb[k].T @ rho[k]
+            iq = 6 * np.arange(M - 1)[:, None] + np.arange(12)  # (M − 1, 12)
+            np.add.at(
+                hess, (iq[:, :, None], iq[:, None, :]), 2.0 * np.einsum("kij,kil->kjl", jq, wjq)
+            )
+            np.add.at(grad, iq, -2.0 * np.einsum("kij,ki->kj", wjq, rho))
+            qb = 2.0 * np.transpose(wjq[:, :2, :], (0, 2, 1))  # (M − 1, 12, 2): J_qᵀ W J_b
+            for a in range(2):
+                np.add.at(hess[:, self._i_ba + a], iq, qb[:, :, a])
+                np.add.at(hess[self._i_ba + a, :], iq, qb[:, :, a])
+            hess[ib, ib] += 2.0 * np.diag(w[:, :2].sum(axis=0))
+            grad[ib] -= 2.0 * (w[:, :2] * rho[:, :2]).sum(axis=0)
             const += float(np.sum(w * rho * rho))
         return const
 
@@ -460,10 +461,10 @@ class NmheProblem:
         u[M - 1] = u_new
         if self.cfg.thrust_delay_samples == 1:
             u[M - 2] = u_new
-        imu = np.full((M, 3), np.nan) if window.imu is None else np.roll(window.imu, -1, axis=0)
+        imu = np.roll(window.imu, -1, axis=0)
         imu[M - 1] = np.nan
         imu[M - 2] = np.nan if imu_new is None else np.array(imu_new, float).reshape(3)
-        accel_bias = np.zeros(2) if window.accel_bias is None else window.accel_bias
+        accel_bias = window.accel_bias
         if window.count == 0 and not np.isfinite(z_new).any():
             return window, self._no_solution(window.trajectory, np.nan_to_num(u[: M - 1]))
         if window.count == 0:
