@@ -80,6 +80,12 @@ def test_runner_up_exposes_a_repeating_corridor_but_not_a_room():
     field = LikelihoodField.build(ref, 0.05, 0.1, margin=2.5)
     aliased = correlative_match(field, corridor(0.3)[::3], (0.0, 0.0, 0.0), 1.5, 0.2, distinct=0.5)
     assert aliased.runner_up >= 0.9 * aliased.score  # a post 1 m along fits as well
+    # the runner-up's pose: at least `distinct` from the best, and it scores what it reports
+    second = aliased.runner_up_pose
+    assert np.hypot(*(second[:2] - aliased.pose[:2])) >= 0.5 - 1e-9
+    assert abs(abs(second[0] - aliased.pose[0]) - 1.0) <= 0.1  # the next post along
+    # (the search scores a subsample of ≤ 400 of the points, hence not to 1e-9)
+    assert field.score(corridor(0.3)[::3], second) == pytest.approx(aliased.runner_up, abs=0.01)
     scene = cluttered_room()
     room = LikelihoodField.build(points(scene, (0.0, 0.0, 0.0)), 0.05, 0.1, margin=2.5)
     cur = points(scene, (0.3, 0.2, 0.1))

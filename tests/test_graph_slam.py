@@ -1,9 +1,11 @@
 """Sliding-window graph SLAM (002): tracking, loop closure, Context copies, the LeafSystem."""
 
 import copy
+from dataclasses import replace
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 from usvdrake.sensors.lidar_model import LidarConfig, LidarModel, preset_by_name
 from usvdrake.systems.slam.graph_slam import GraphSlam, GraphSlamConfig, between, compose
@@ -308,3 +310,66 @@ def test_gnc_rejects_a_false_loop_and_keeps_the_true_one():
     assert slam._rejected == {len(slam.constraints) - 1}  # the false loop, the last added
     err = [np.hypot(*(nd.pose[:2] - t[:2])) for nd, t in zip(slam.nodes, truth, strict=True)]
     assert max(err) < 0.25  # the false loop kept (Gaussian, no GNC) bends the square by 2 m
+
+
+def _room_scan(pose, fov_deg: float, n: int = 180) -> np.ndarray:
+    """Points (sensor frame, beam order) a beam every fov/n degrees sees of a 16 × 12 m room
+    with two pillars and a recess: the nearest wall sample within each beam's half-width."""
+    t = np.linspace(0.0, 1.0, 800)
+    segs = [((-8, -6), (8, -6)), ((8, -6), (8, 6)), ((8, 6), (-8, 6)), ((-8, 6), (-8, -6))]
+    segs += [((3, 1), (4, 1)), ((4, 1), (4, 2)), ((-4, -3), (-3, -2.5)), ((6, -6), (6, -4))]
+    wall = np.vstack([np.outer(1 - t, a) + np.outer(t, b) for a, b in segs])
+    local = (wall - pose[:2]) @ np.array(
+        [[np.cos(pose[2]), -np.sin(pose[2])], [np.sin(pose[2]), np.cos(pose[2])]]
+    )
+    rng, bearing = np.hypot(*local.T), np.arctan2(local[:, 1], local[:, 0])
+    half = np.deg2rad(fov_deg) / 2
+    beams = np.linspace(-half, half, n)
+    width = beams[1] - beams[0]
+    out = []
+    for b in beams:
+        hit = np.abs(np.angle(np.exp(1j * (bearing - b)))) < width / 2
+        if hit.any():
+            r = rng[hit].min()
+            out.append((r * np.cos(b), r * np.sin(b)))
+    return np.array(out)
+
+
+def test_a_searched_loop_is_refined_against_the_candidates_submap():
+    """``loop_refine_submap``: the new node's wide scan overlaps the candidate's narrow one by a
+    third, too little for a loop, but the candidate and its neighbours together cover it; the
+    loop is then accepted and as accurate as a scan match. The correlative search runs first."""
+    from usvdrake.systems.slam.graph_slam import Node
+
+    cfg = GraphSlamConfig(
+        loop_linear_window=1.0,
+        loop_angular_window=0.3,
+        loop_submap=1,
+        min_loop_points=100,
+        max_loop_ambiguity=0.95,
+        map_size=[20.0, 20.0],
+        map_origin=[-10.0, -10.0],
+    )
+    truth = [np.array([0.0, 0.0, np.deg2rad(d)]) for d in (-60, 0, 60)]
+    truth += [np.array([0.3, -0.2, 0.05])] * 2  # the revisit (and the scan before it)
+    fovs = (60, 60, 60, 180, 180)
+    k, i = 4, 1
+    drifted = truth[k] + [0.4, -0.3, 0.06]  # the graph's pose of the revisit, off by 0.5 m
+    results = {}
+    for refine in (False, True):
+        slam = GraphSlam(replace(cfg, loop_refine_submap=refine))
+        for n, (pose, fov) in enumerate(zip(truth, fovs, strict=True)):
+            pts = _room_scan(pose, fov)
+            slam.nodes.append(
+                Node(drifted if n >= 3 else pose, pts, np.ones(len(pts)), np.zeros(len(pts)), n)
+            )
+            slam.nodes[-1].tree = cKDTree(pts)
+        results[refine] = (slam._link(i, k, robust=False, kind="loop", search=True), slam)
+    assert not results[False][0]  # one narrow scan: too few correspondences
+    ok, slam = results[True]
+    assert ok
+    z = slam.constraints[-1].z
+    true_z = between(truth[i], truth[k])
+    assert np.hypot(*(z[:2] - true_z[:2])) < 0.02
+    assert abs(z[2] - true_z[2]) < np.deg2rad(0.5)
+    assert np.all(np.linalg.eigvalsh(slam.constraints[-1].cov) > 0)

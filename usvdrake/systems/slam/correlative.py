@@ -95,6 +95,7 @@ class CorrelativeMatch(NamedTuple):
     pose: np.ndarray  # (x [m], y [m], θ [rad]) of the current points in the field's frame
     score: float  # mean likelihood of the points there, in [0, 1]
     runner_up: float  # best score at least ``distinct`` away (NaN when not asked for)
+    runner_up_pose: np.ndarray | None = None  # (x, y, θ) of that runner-up (None: not asked)
 
 
 @njit(cache=True)
@@ -205,7 +206,11 @@ def correlative_match(
     args = (field.fine, x0 / res, y0 / res, px, py, thetas, order, ci, cj, ca, flat, k, nfx, nfy)
     best, a, i, j = _refine(*args, 0, 0, -1.0)
     pose = np.array([x0 + i * res + field.origin[0], y0 + j * res + field.origin[1], thetas[a]])
-    runner_up = np.nan
+    runner_up, runner_up_pose = np.nan, None
     if distinct > 0:
-        runner_up = max(_refine(*args, i, j, distinct / res)[0], 0.0) / len(pts)
-    return CorrelativeMatch(pose, float(best / len(pts)), float(runner_up))
+        second, a2, i2, j2 = _refine(*args, i, j, distinct / res)
+        runner_up = max(second, 0.0) / len(pts)
+        runner_up_pose = np.array(
+            [x0 + i2 * res + field.origin[0], y0 + j2 * res + field.origin[1], thetas[a2]]
+        )
+    return CorrelativeMatch(pose, float(best / len(pts)), float(runner_up), runner_up_pose)

@@ -82,6 +82,8 @@ class GraphSlamConfig:
     # likelihood score reaches min_loop_score; 0: PLICP's own rotation search (002)
     loop_linear_window: float = 0.0
     loop_submap: int = 3  # [nodes] either side of a loop candidate (before the new node) matched
+    # PLICP refines a searched loop against the candidate's submap (True) or its scan (False)
+    loop_refine_submap: bool = False
     loop_robust: bool = True  # Barron-robustified loop constraints (False: Gaussian)
     # full optimisations reject outlier loops by GNC (TLS loss) instead of a robust kernel;
     # the loops' covariance gets this floor [m, m, rad] (what a correct loop may still be off)
@@ -392,16 +394,17 @@ class GraphSlam:
         a, b = self.nodes[i], self.nodes[k]
         guess = between(a.pose, b.pose)
         rotation_search, pairing = search, 1.0  # PLICP's own rotation search, default pairing
+        reference, tree, searched = a.points, a.tree, False
         if search and self.cfg.loop_linear_window > 0:
             h = self.cfg.loop_submap
-            reference = LikelihoodField.build(
-                self._submap(i, range(i - h, i + h + 1)),
-                self.cfg.search_resolution,
-                self.cfg.search_sigma,
-                margin=self.cfg.loop_linear_window + 1.0,
-            )
+            submap = self._submap(i, range(i - h, i + h + 1))
             match = correlative_match(
-                reference,
+                LikelihoodField.build(
+                    submap,
+                    self.cfg.search_resolution,
+                    self.cfg.search_sigma,
+                    margin=self.cfg.loop_linear_window + 1.0,
+                ),
                 self._submap(k, range(k - h, k + 1)),
                 guess,
                 self.cfg.loop_linear_window,
@@ -416,24 +419,32 @@ class GraphSlam:
             ):
                 self.stats["failed_matches"] += 1
                 return False
-            rotation_search, pairing = False, self.cfg.refine_max_distance
+            rotation_search, pairing, searched = False, self.cfg.refine_max_distance, True
+            if self.cfg.loop_refine_submap:
+                # the new scan refined against the candidate's whole submap (each of its scans
+                # in beam order, so PLICP's scan-order neighbours stay on one scan; the jumps
+                # between scans exceed max_segment): far more overlap than its single scan
+                reference, tree = submap, cKDTree(submap)
         res = plicp(
-            a.points,
+            reference,
             b.points,
             initial=tuple(guess),
-            tree=a.tree,
+            tree=tree,
             rotation_search=rotation_search,
             max_distance=pairing,
         )
         loop = kind == "loop"
         need = self.cfg.min_loop_points if loop else self.cfg.min_link_points
         limit = self.cfg.max_loop_residual if loop else self.cfg.max_link_residual
-        if not (res.converged and res.n_valid >= need and res.residual <= limit):
+        # a searched loop starts in the right basin: PLICP cycling between two correspondence
+        # sets at the end (not converged) still leaves a good pose, which the residual checks
+        settled = res.converged or (searched and self.cfg.loop_refine_submap)
+        if not (settled and res.n_valid >= need and res.residual <= limit):
             self.stats["failed_matches"] += 1
             return False
         z = np.array([res.t[0], res.t[1], res.theta])
         self.constraints.append(
-            Constraint(i, k, z, self._covariance(a.points, b.points, res), robust, kind)
+            Constraint(i, k, z, self._covariance(reference, b.points, res), robust, kind)
         )
         return True
 
