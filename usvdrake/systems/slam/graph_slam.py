@@ -443,6 +443,8 @@ class GraphSlam:
             self.stats["failed_matches"] += 1
             return False
         z = np.array([res.t[0], res.t[1], res.theta])
+        # (against a submap, Censi's covariance takes every reference point's range noise along
+        # its bearing from node i, though its neighbours' points were ranged from elsewhere)
         self.constraints.append(
             Constraint(i, k, z, self._covariance(reference, b.points, res), robust, kind)
         )
