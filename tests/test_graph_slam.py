@@ -8,8 +8,10 @@ import pytest
 from scipy.spatial import cKDTree
 
 from usvdrake.sensors.lidar_model import LidarConfig, LidarModel, preset_by_name
+from usvdrake.sensors.raycast import cast
 from usvdrake.systems.slam.graph_slam import GraphSlam, GraphSlamConfig, between, compose
 from usvdrake.worlds import box, cylinder
+from usvdrake.worlds.synthetic import HOKUYO, cluttered_room
 from usvdrake.worlds.world import World
 
 # A 40 × 24 m pond with an island and clutter: enough structure for PLICP everywhere.
@@ -312,27 +314,16 @@ def test_gnc_rejects_a_false_loop_and_keeps_the_true_one():
     assert max(err) < 0.25  # the false loop kept (Gaussian, no GNC) bends the square by 2 m
 
 
-def _room_scan(pose, fov_deg: float, n: int = 180) -> np.ndarray:
-    """Points (sensor frame, beam order) a beam every fov/n degrees sees of a 16 × 12 m room
-    with two pillars and a recess: the nearest wall sample within each beam's half-width."""
-    t = np.linspace(0.0, 1.0, 800)
-    segs = [((-8, -6), (8, -6)), ((8, -6), (8, 6)), ((8, 6), (-8, 6)), ((-8, 6), (-8, -6))]
-    segs += [((3, 1), (4, 1)), ((4, 1), (4, 2)), ((-4, -3), (-3, -2.5)), ((6, -6), (6, -4))]
-    wall = np.vstack([np.outer(1 - t, a) + np.outer(t, b) for a, b in segs])
-    local = (wall - pose[:2]) @ np.array(
-        [[np.cos(pose[2]), -np.sin(pose[2])], [np.sin(pose[2]), np.cos(pose[2])]]
-    )
-    rng, bearing = np.hypot(*local.T), np.arctan2(local[:, 1], local[:, 0])
-    half = np.deg2rad(fov_deg) / 2
-    beams = np.linspace(-half, half, n)
-    width = beams[1] - beams[0]
-    out = []
-    for b in beams:
-        hit = np.abs(np.angle(np.exp(1j * (bearing - b)))) < width / 2
-        if hit.any():
-            r = rng[hit].min()
-            out.append((r * np.cos(b), r * np.sin(b)))
-    return np.array(out)
+ROOM = cluttered_room()
+
+
+def _sector_scan(pose, fov_deg: float) -> np.ndarray:
+    """Points (sensor frame, beam order) of the Hokuyo's beams within ± fov/2 of straight
+    ahead in the cluttered room of the correlative tests, cast from ``pose``."""
+    r = cast(ROOM, HOKUYO, [0.0], np.array(pose[:2]), 1.0, pose[2], 30.0)[0]
+    keep = np.isfinite(r) & (np.abs(HOKUYO.azimuths) <= np.deg2rad(fov_deg) / 2)
+    a = HOKUYO.azimuths[keep]
+    return np.column_stack([r[keep] * np.cos(a), r[keep] * np.sin(a)])
 
 
 def test_a_searched_loop_is_refined_against_the_candidates_submap():
@@ -345,7 +336,7 @@ def test_a_searched_loop_is_refined_against_the_candidates_submap():
         loop_linear_window=1.0,
         loop_angular_window=0.3,
         loop_submap=1,
-        min_loop_points=100,
+        min_loop_points=400,
         max_loop_ambiguity=0.95,
         map_size=[20.0, 20.0],
         map_origin=[-10.0, -10.0],
@@ -359,7 +350,7 @@ def test_a_searched_loop_is_refined_against_the_candidates_submap():
     for refine in (False, True):
         slam = GraphSlam(replace(cfg, loop_refine_submap=refine))
         for n, (pose, fov) in enumerate(zip(truth, fovs, strict=True)):
-            pts = _room_scan(pose, fov)
+            pts = _sector_scan(pose, fov)
             slam.nodes.append(
                 Node(drifted if n >= 3 else pose, pts, np.ones(len(pts)), np.zeros(len(pts)), n)
             )

@@ -204,13 +204,15 @@ def correlative_match(
     order = np.argsort(-flat, kind="stable")
     ca, ci, cj = np.unravel_index(np.arange(flat.size), bounds.shape)
     args = (field.fine, x0 / res, y0 / res, px, py, thetas, order, ci, cj, ca, flat, k, nfx, nfy)
+
+    def pose_of(a: int, i: int, j: int) -> np.ndarray:
+        return np.array([x0 + i * res + field.origin[0], y0 + j * res + field.origin[1], thetas[a]])
+
     best, a, i, j = _refine(*args, 0, 0, -1.0)
-    pose = np.array([x0 + i * res + field.origin[0], y0 + j * res + field.origin[1], thetas[a]])
     runner_up, runner_up_pose = np.nan, None
     if distinct > 0:
-        second, a2, i2, j2 = _refine(*args, i, j, distinct / res)
-        runner_up = max(second, 0.0) / len(pts)
-        runner_up_pose = np.array(
-            [x0 + i2 * res + field.origin[0], y0 + j2 * res + field.origin[1], thetas[a2]]
-        )
-    return CorrelativeMatch(pose, float(best / len(pts)), float(runner_up), runner_up_pose)
+        second, *cell = _refine(*args, i, j, distinct / res)
+        runner_up, runner_up_pose = max(second, 0.0) / len(pts), pose_of(*cell)
+    return CorrelativeMatch(
+        pose_of(a, i, j), float(best / len(pts)), float(runner_up), runner_up_pose
+    )
