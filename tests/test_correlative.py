@@ -51,18 +51,23 @@ def test_branch_and_bound_equals_the_exhaustive_search():
     ref, cur = points(scene, (0.0, 0.0, 0.0)), points(scene, (0.37, -0.21, np.deg2rad(7.0)))
     field = LikelihoodField.build(ref, 0.05, 0.1, margin=1.5)
     step = np.deg2rad(1.0)
-    match = correlative_match(field, cur, (0.0, 0.0, 0.0), 0.5, np.deg2rad(10.0), step, 150)
+    match = correlative_match(
+        field, cur, (0.0, 0.0, 0.0), 0.5, np.deg2rad(10.0), step, 150, distinct=0.3
+    )
     sub = cur[:: -(-len(cur) // 150)]
-    best, best_pose = -1.0, None
-    for th in step * np.arange(-10, 11):
-        for x in 0.05 * np.arange(-10, 11):
-            for y in 0.05 * np.arange(-10, 11):
-                s = field.score(sub, (x, y, th))
-                if s > best + 1e-12:
-                    best, best_pose = s, (x, y, th)
+    grid = [
+        (field.score(sub, (x, y, th)), (x, y, th))
+        for th in step * np.arange(-10, 11)
+        for x in 0.05 * np.arange(-10, 11)
+        for y in 0.05 * np.arange(-10, 11)
+    ]
+    best, best_pose = max(grid, key=lambda c: c[0])
     assert match.score == pytest.approx(best, abs=1e-9)
     assert np.allclose(match.pose, best_pose, atol=1e-9)
     assert np.hypot(match.pose[0] - 0.37, match.pose[1] + 0.21) <= 0.05
+    # the runner-up too: the best of the translations ≥ 0.3 m (6 cells) from the best pose
+    far = [c for c in grid if np.hypot(c[1][0] - best_pose[0], c[1][1] - best_pose[1]) > 0.3]
+    assert match.runner_up == pytest.approx(max(c[0] for c in far), abs=1e-9)
 
 
 def corridor(shift: float) -> np.ndarray:

@@ -347,6 +347,12 @@ def make_parser() -> argparse.ArgumentParser:
         help="robustness test: replace this fraction of scans by garbage (random, half-empty, NaN)",
     )
     m.add_argument("--seed", type=int, default=0, help="which scans --garbage replaces")
+    m.add_argument(
+        "--full-period",
+        type=float,
+        default=None,
+        help="log time [s] between full-graph optimisations after loops (default 1; 0: every scan)",
+    )
     m.add_argument("--quiet", action="store_true", help="no progress bar")
     m.set_defaults(func=cmd_slam2d)
     s3 = sub.add_parser("slam3d", help="lidar-IMU-GPS factor-graph SLAM (000 §V) on a recording")
@@ -425,6 +431,8 @@ def cmd_slam2d(args) -> int:
 
     if not 0.0 <= args.garbage <= 1.0:
         raise ConfigError("command line", "--garbage", "a fraction in [0, 1]", args.garbage)
+    if args.full_period is not None and not args.full_period >= 0.0:
+        raise ConfigError("command line", "--full-period", "a time >= 0 s", args.full_period)
     metrics = run_slam2d(
         args.log,
         args.out,
@@ -434,6 +442,7 @@ def cmd_slam2d(args) -> int:
         progress=not args.quiet,
         garbage=args.garbage,
         seed=args.seed,
+        **({} if args.full_period is None else {"full_period": args.full_period}),
     )
     width = max(len(k) for k in metrics)
     for key, value in metrics.items():

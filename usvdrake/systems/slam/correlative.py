@@ -12,17 +12,18 @@ points scores the mean field value under them (Olson's eq. 4 with the lookup tab
 That grid is searched exactly by Olson's two-level method (§IV-B): a coarse table whose cell
 holds the maximum of the fine cells it covers bounds the score of every fine translation inside
 a coarse one. All coarse candidates are scored (a numba kernel over rotations × translations ×
-points), and the fine translations are evaluated coarse cell by coarse cell in decreasing bound
-order until the bound falls below the best fine score found: the result equals the exhaustive
-fine search, at the cost of the coarse one and a few fine cells. The fine answer is as accurate
-as the grid (``resolution`` in translation, ``angular_step`` in rotation); PLICP refines it.
+points, rotations on parallel threads), and the fine translations are evaluated coarse cell by
+coarse cell in decreasing bound order until the bound falls below the best fine score found:
+the result equals the exhaustive fine search, at the cost of the coarse one and a few fine
+cells. The fine answer is as accurate as the grid (``resolution`` in translation,
+``angular_step`` in rotation); PLICP refines it.
 """
 
 from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 from scipy.ndimage import distance_transform_edt
 
 from usvdrake.systems.slam.plicp import rot
@@ -98,13 +99,16 @@ class CorrelativeMatch(NamedTuple):
     runner_up_pose: np.ndarray | None = None  # (x, y, θ) of that runner-up (None: not asked)
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _score_grid(table, cell0x, cell0y, px, py, thetas, nx, ny, stride):
     """scores[θ, i, j] = Σ_points table[cell of (R(θ) p) + cell0 + (i, j)·stride] for points
-    given in cells (px, py: coordinates [cells] relative to the table's origin)."""
+    given in cells (px, py: coordinates [cells] relative to the table's origin). Rotations
+    run in parallel (numba threads; each writes its own slice, so the result does not depend
+    on the thread count): on 2 cores a ±92° tracking search on Freiburg 079 scans took 16 ms
+    instead of 40 ms serially."""
     rows, cols = table.shape
     out = np.zeros((len(thetas), nx, ny))
-    for a in range(len(thetas)):
+    for a in prange(len(thetas)):
         c, s = np.cos(thetas[a]), np.sin(thetas[a])
         for p in range(len(px)):
             bx = int(np.floor(c * px[p] - s * py[p] + cell0x))
@@ -201,17 +205,27 @@ def correlative_match(
     ncx = -(-nfx // k)
     bounds = _score_grid(field.coarse, x0 / res, y0 / res, px, py, thetas, ncx, ncx, k)
     flat = bounds.ravel()
-    order = np.argsort(-flat, kind="stable")
     ca, ci, cj = np.unravel_index(np.arange(flat.size), bounds.shape)
-    args = (field.fine, x0 / res, y0 / res, px, py, thetas, order, ci, cj, ca, flat, k, nfx, nfy)
+    common = (field.fine, x0 / res, y0 / res, px, py, thetas)
+    rest = (ci, cj, ca, flat, k, nfx, nfy)
+    top = np.array([np.argmax(flat)])
+
+    def search(*exclude):
+        # the fine score found inside the best-bounded coarse cell is reached, so no coarse
+        # cell bounded below it can hold the answer: only the others are sorted (a full sort
+        # of every rotation × coarse cell took a fifth of a tracking search), in the order a
+        # stable sort of all of them gives them, so the result is the exhaustive one
+        reached = _refine(*common, top, *rest, *exclude)[0]
+        keep = np.flatnonzero(flat >= reached)
+        return _refine(*common, keep[np.argsort(-flat[keep], kind="stable")], *rest, *exclude)
 
     def pose_of(a: int, i: int, j: int) -> np.ndarray:
         return np.array([x0 + i * res + field.origin[0], y0 + j * res + field.origin[1], thetas[a]])
 
-    best, a, i, j = _refine(*args, 0, 0, -1.0)
+    best, a, i, j = search(0, 0, -1.0)
     runner_up, runner_up_pose = np.nan, None
     if distinct > 0:
-        second, *cell = _refine(*args, i, j, distinct / res)
+        second, *cell = search(i, j, distinct / res)
         runner_up, runner_up_pose = max(second, 0.0) / len(pts), pose_of(*cell)
     return CorrelativeMatch(
         pose_of(a, i, j), float(best / len(pts)), float(runner_up), runner_up_pose

@@ -167,7 +167,8 @@ class Node:
 
     def field(self, cfg: "GraphSlamConfig") -> LikelihoodField:
         """The likelihood field of its scan for the tracking search (built on first use,
-        shared by copies; loops search fields of submaps)."""
+        shared by copies, dropped once a newer node takes over; loops search fields of
+        submaps)."""
         if self._field is None:
             self._field = LikelihoodField.build(
                 self.points,
@@ -342,6 +343,9 @@ class GraphSlam:
 
     def _new_node(self, points, ranges, angles, t, rel, cov) -> None:
         prev = len(self.nodes) - 1
+        # only the latest node is searched by tracking: its predecessor's likelihood field
+        # (megabytes per scan) goes, or a long log's fields fill the memory
+        self.nodes[prev]._field = None
         node = self._add_node(self.pose.copy(), points, ranges, angles, t)
         k = len(self.nodes) - 1
         if cov is None:
