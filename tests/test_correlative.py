@@ -8,6 +8,7 @@ from usvdrake.systems.slam.correlative import (
     LikelihoodField,
     correlative_match,
     distance_field,
+    lateral_motion,
 )
 from usvdrake.systems.slam.plicp import plicp
 from usvdrake.worlds.synthetic import HOKUYO, cluttered_room
@@ -97,3 +98,62 @@ def test_runner_up_exposes_a_repeating_corridor_but_not_a_room():
     clear = correlative_match(room, cur, (0.0, 0.0, 0.0), 1.5, 0.3, distinct=0.5)
     assert clear.runner_up < 0.7 * clear.score
     assert np.hypot(clear.pose[0] - 0.3, clear.pose[1] - 0.2) <= 0.1
+
+
+def test_lateral_motion_is_zero_along_any_arc_and_the_offset_when_sliding():
+    assert lateral_motion((0.0, 0.0, 0.0), (1.0, 0.0, 0.0)) == 0.0  # driving straight
+    assert lateral_motion((2.0, 1.0, 0.3), (2.0, 1.0, 0.8)) == 0.0  # turning on the spot
+    for radius, angle in ((3.0, 0.4), (0.7, -1.1)):  # a circular arc, left and right
+        end = (radius * np.sin(angle), radius * (1.0 - np.cos(angle)), angle)
+        assert lateral_motion((0.0, 0.0, 0.0), end) == pytest.approx(0.0, abs=1e-12)
+    assert lateral_motion((0.0, 0.0, 0.0), (0.0, 0.4, 0.0)) == pytest.approx(0.4)
+    # facing +y, a step towards −x is a slide to the left
+    assert lateral_motion((1.0, 2.0, np.pi / 2), (0.0, 2.0, np.pi / 2)) == pytest.approx(1.0)
+    assert lateral_motion((1.0, 2.0, np.pi / 2), (1.0, 3.0, np.pi / 2)) == pytest.approx(0.0)
+
+
+def test_branch_and_bound_with_the_lateral_prior_equals_the_exhaustive_search():
+    """The prior lowers each fine candidate by weight · sideways²; the coarse bounds by its least
+    value over the cell, so the two-level search still returns the exhaustive grid's best."""
+    scene = cluttered_room()
+    ref, cur = points(scene, (0.0, 0.0, 0.0)), points(scene, (0.37, -0.21, np.deg2rad(7.0)))
+    field = LikelihoodField.build(ref, 0.05, 0.1, margin=1.5)
+    step, prev, weight = np.deg2rad(1.0), np.array([0.1, -0.4, 0.2]), 20.0
+    match = correlative_match(
+        field, cur, (0.0, 0.0, 0.0), 0.5, np.deg2rad(10.0), step, 150, 0.3, prev, weight
+    )
+    sub = cur[:: -(-len(cur) // 150)]
+    grid = [
+        (field.score(sub, pose) - weight * lateral_motion(prev, pose) ** 2, pose)
+        for th in step * np.arange(-10, 11)
+        for x in 0.05 * np.arange(-10, 11)
+        for y in 0.05 * np.arange(-10, 11)
+        for pose in [(x, y, th)]
+    ]
+    best, best_pose = max(grid, key=lambda c: c[0])
+    assert np.allclose(match.pose, best_pose, atol=1e-9)
+    # the reported score is the likelihood alone, the runner-up's too
+    assert match.score == pytest.approx(field.score(sub, best_pose), abs=1e-9)
+    far = [c for c in grid if np.hypot(c[1][0] - best_pose[0], c[1][1] - best_pose[1]) > 0.3]
+    second = max(far, key=lambda c: c[0])[1]
+    assert match.runner_up == pytest.approx(field.score(sub, second), abs=1e-9)
+    # a weight this strong pulls the answer off the unpenalised optimum towards no sliding
+    free = correlative_match(field, cur, (0.0, 0.0, 0.0), 0.5, np.deg2rad(10.0), step, 150)
+    assert abs(lateral_motion(prev, match.pose)) < abs(lateral_motion(prev, free.pose))
+
+
+def test_lateral_prior_picks_the_alias_reached_without_sliding():
+    """A corridor along the sensor's y axis with a post every 1 m: shifts along it by whole
+    posts fit alike, and they are sideways motions. Alone the search takes the best fit; with
+    the prior the one the previous pose reaches by driving (no sliding) wins."""
+    along_y = np.array([[0.0, -1.0], [1.0, 0.0]])  # the corridor of corridor() turned by 90°
+    field = LikelihoodField.build(corridor(0.0) @ along_y.T, 0.05, 0.1, margin=2.5)
+    cur = corridor(0.3)[::3] @ along_y.T  # seen from 0.3 m along it (+y)
+    args = (field, cur, (0.0, 0.0, 0.0), 1.5, 0.1)
+    alone = correlative_match(*args)
+    assert abs(alone.pose[1] - 0.3) <= 0.05 and abs(alone.pose[0]) <= 0.05
+    # the previous scan taken where the post 1 m back (or on) fits without sliding: that wins
+    for prev_y in (-0.7, 1.3):
+        prior = correlative_match(*args, prior_from=(0.0, prev_y, 0.0), lateral_weight=0.25)
+        assert abs(prior.pose[1] - prev_y) <= 0.05 and abs(prior.pose[0]) <= 0.05
+        assert 0.8 * alone.score < prior.score < alone.score  # a slightly worse fit

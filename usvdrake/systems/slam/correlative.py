@@ -92,6 +92,17 @@ class LikelihoodField:
         return float(self.fine[gy[ok], gx[ok]].sum() / max(len(points), 1))
 
 
+def lateral_motion(start, end) -> float:
+    """[m] sideways part of the step from pose ``start`` to pose ``end`` (x, y, θ): the
+    translation's component normal to the mean heading (θ_start + θ_end)/2. A vehicle that
+    cannot move sideways (wheels; a hull, nearly) drives a circular arc between two scans,
+    whose chord lies along that mean heading: 0 for driving, turning on the spot and any arc
+    between them alike. (Ours: the corridor aliasing of issue 6's building logs matched turns
+    on the spot as sideways jumps of up to 1 m.)"""
+    phi = 0.5 * (start[2] + end[2])
+    return float(-np.sin(phi) * (end[0] - start[0]) + np.cos(phi) * (end[1] - start[1]))
+
+
 class CorrelativeMatch(NamedTuple):
     pose: np.ndarray  # (x [m], y [m], θ [rad]) of the current points in the field's frame
     score: float  # mean likelihood of the points there, in [0, 1]
@@ -125,13 +136,59 @@ def _score_grid(table, cell0x, cell0y, px, py, thetas, nx, ny, stride):
 
 
 @njit(cache=True)
+def _least_lateral_sq(ns, nc, lx, ly, res, k, nfx, ncx):
+    """out[a, ci, cj] = least (ns[a] x + nc[a] y)² over the coarse cell's translations x ∈ lx +
+    [ci·k, min(ci·k + k − 1, nfx − 1)]·res (y likewise): the sideways offset is linear in
+    them, so its extremes lie on the cell's corners (0 when they straddle 0)."""
+    out = np.zeros((len(ns), ncx, ncx))
+    for a in range(len(ns)):
+        for ci in range(ncx):
+            x0 = lx + ci * k * res
+            x1 = lx + min(ci * k + k - 1, nfx - 1) * res
+            for cj in range(ncx):
+                y0 = ly + cj * k * res
+                y1 = ly + min(cj * k + k - 1, nfx - 1) * res
+                c00 = ns[a] * x0 + nc[a] * y0
+                c01 = ns[a] * x0 + nc[a] * y1
+                c10 = ns[a] * x1 + nc[a] * y0
+                c11 = ns[a] * x1 + nc[a] * y1
+                lo = min(min(c00, c01), min(c10, c11))
+                hi = max(max(c00, c01), max(c10, c11))
+                if lo > 0.0:
+                    out[a, ci, cj] = lo * lo
+                elif hi < 0.0:
+                    out[a, ci, cj] = hi * hi
+    return out
+
+
+@njit(cache=True)
 def _refine(
-    fine, cell0x, cell0y, px, py, thetas, order, ci, cj, ca, bounds, k, nfx, nfy, ex_i, ex_j, ex_r
+    fine,
+    cell0x,
+    cell0y,
+    px,
+    py,
+    thetas,
+    lat,
+    order,
+    ci,
+    cj,
+    ca,
+    bounds,
+    k,
+    nfx,
+    nfy,
+    ex_i,
+    ex_j,
+    ex_r,
 ):
     """Branch and bound over the coarse cells in ``order`` (decreasing bound): the best fine
     (θ index, i, j) and its score; stops once a bound cannot beat the best. Translations within
-    ``ex_r`` cells of (ex_i, ex_j) are excluded (ex_r < 0: none)."""
+    ``ex_r`` cells of (ex_i, ex_j) are excluded (ex_r < 0: none). ``lat`` = (weight, x, y, and
+    per rotation −sin φ, cos φ): a fine cell's score loses weight · (lat[3][a] (x + i·res) +
+    lat[4][a] (y + j·res))², the arc prior of :func:`lateral_motion` (weight 0: none)."""
     rows, cols = fine.shape
+    w, lx, ly, ns, nc, res = lat[0][0], lat[0][1], lat[0][2], lat[1], lat[2], lat[0][3]
     best, bi, bj, ba = -1.0, 0, 0, 0
     for n in range(len(order)):
         o = order[n]
@@ -156,6 +213,9 @@ def _refine(
                     gy = int(np.floor(s * px[p] + c * py[p] + cell0y)) + j
                     if gx >= 0 and gx < cols and gy >= 0 and gy < rows:
                         total += fine[gy, gx]
+                if w > 0.0:
+                    d = ns[a] * (lx + i * res) + nc[a] * (ly + j * res)
+                    total -= w * d * d
                 if total > best:
                     best, bi, bj, ba = total, i, j, a
     return best, ba, bi, bj
@@ -170,6 +230,8 @@ def correlative_match(
     angular_step: float | None = None,
     max_points: int = 400,
     distinct: float = 0.0,
+    prior_from=None,
+    lateral_weight: float = 0.0,
 ) -> CorrelativeMatch:
     """The best pose (x, y, θ) of ``current`` (M × 2 points [m], sensor frame) in ``field``'s
     frame among translations within ± ``linear_window`` [m] of ``guess`` on the field's grid
@@ -177,15 +239,22 @@ def correlative_match(
     angle that moves the farthest used point by one cell, Olson §III-A), with its score, the
     mean likelihood [0, 1] of the points there. Exact on that grid (branch and bound).
 
-    No motion prior (Olson's eq. 1 multiplies one in): on the subsampled CARMEN logs, whose
-    steps alternate between turning on the spot and driving, a constant-velocity prior of
-    any weight we tried made tracking worse; the caller weighs the search against its own
-    constant-velocity match instead.
+    Olson's eq. 1 multiplies in a motion prior. A constant-velocity one, of any weight we
+    tried, made tracking worse on the subsampled CARMEN logs, whose steps alternate between
+    turning on the spot and driving (the caller weighs the search against its own
+    constant-velocity match instead); the kinematic one below, which only forbids sliding
+    sideways, made it better (issue 6's logs: see ``offline.LOG_CONFIG``).
 
     With ``distinct`` > 0 [m] it also finds the runner-up: the best score of the window's
     translations at least that far from the best pose (any rotation), the same branch
     and bound with that disc excluded. A runner-up close to the score means the scene repeats
-    (a corridor, a row of doors) and the best pose is not to be trusted as a loop closure."""
+    (a corridor, a row of doors) and the best pose is not to be trusted as a loop closure.
+
+    With ``prior_from`` (the pose (x, y, θ) the sensor had at the previous scan, in the field's
+    frame) and ``lateral_weight`` > 0, a candidate's score is lowered by lateral_weight ·
+    :func:`lateral_motion`² [1/m²] (the coarse bounds by its least value over their cell, so
+    the search stays exact): of two poses a corridor fits alike, the one reached without
+    sliding sideways wins. The returned ``score`` is the likelihood alone."""
     pts = np.asarray(current, float)
     if len(pts) == 0:
         raise ValueError("correlative_match: no current points")
@@ -204,9 +273,17 @@ def correlative_match(
     px, py = pts[:, 0] / res, pts[:, 1] / res
     ncx = -(-nfx // k)
     bounds = _score_grid(field.coarse, x0 / res, y0 / res, px, py, thetas, ncx, ncx, k)
+    weight = lateral_weight * len(pts) if prior_from is not None else 0.0
+    # (x, y) of fine cell (i, j) relative to the previous pose: (lx + i·res, ly + j·res)
+    prev = np.zeros(3) if prior_from is None else np.asarray(prior_from, float)
+    lx, ly = x0 + field.origin[0] - prev[0], y0 + field.origin[1] - prev[1]
+    phi = 0.5 * (prev[2] + thetas)
+    lat = (np.array([weight, lx, ly, res]), -np.sin(phi), np.cos(phi))
+    if weight > 0:  # each coarse bound less the least penalty over its cell's translations
+        bounds = bounds - weight * _least_lateral_sq(lat[1], lat[2], lx, ly, res, k, nfx, ncx)
     flat = bounds.ravel()
     ca, ci, cj = np.unravel_index(np.arange(flat.size), bounds.shape)
-    common = (field.fine, x0 / res, y0 / res, px, py, thetas)
+    common = (field.fine, x0 / res, y0 / res, px, py, thetas, lat)
     rest = (ci, cj, ca, flat, k, nfx, nfy)
     top = np.array([np.argmax(flat)])
 
@@ -223,10 +300,15 @@ def correlative_match(
         return np.array([x0 + i * res + field.origin[0], y0 + j * res + field.origin[1], thetas[a]])
 
     best, a, i, j = search(0, 0, -1.0)
+    if weight > 0:  # the likelihood alone
+        best += weight * lateral_motion(prev, pose_of(a, i, j)) ** 2
     runner_up, runner_up_pose = np.nan, None
     if distinct > 0:
         second, *cell = search(i, j, distinct / res)
-        runner_up, runner_up_pose = max(second, 0.0) / len(pts), pose_of(*cell)
+        runner_up_pose = pose_of(*cell)
+        if weight > 0:
+            second += weight * lateral_motion(prev, runner_up_pose) ** 2
+        runner_up = max(second, 0.0) / len(pts)
     return CorrelativeMatch(
         pose_of(a, i, j), float(best / len(pts)), float(runner_up), runner_up_pose
     )

@@ -41,7 +41,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from usvdrake.systems.slam.censi_covariance import plicp_covariance
-from usvdrake.systems.slam.correlative import LikelihoodField, correlative_match
+from usvdrake.systems.slam.correlative import LikelihoodField, correlative_match, lateral_motion
 from usvdrake.systems.slam.occupancy_mapping import LogOddsGrid
 from usvdrake.systems.slam.plicp import plicp, rot
 from usvdrake.systems.slam.robust_kernel import gtsam_barron
@@ -64,6 +64,9 @@ class GraphSlamConfig:
     # likelihood score is higher by this much: along a featureless corridor the two tie and
     # the motion model decides (Olson 2009's motion prior, as a margin)
     search_prior_margin: float = 0.02
+    # [1/m²] the search's and that choice's scores lose this × the step's sideways motion²
+    # (correlative.lateral_motion: 0 along any arc; for vehicles that cannot slide; 0: off)
+    lateral_weight: float = 0.0
     refine_max_distance: float = 1.0  # [m] PLICP's pairing distance refining the search
     search_resolution: float = 0.05  # [m] its grid (and the likelihood field's cells)
     search_sigma: float = 0.1  # [m] width of a reference point in the likelihood field
@@ -249,6 +252,8 @@ class GraphSlam:
                 self._rel if self.cfg.search_from_rest else guess,
                 self.cfg.search_linear_window,
                 self.cfg.search_angular_window,
+                prior_from=self._rel,
+                lateral_weight=self.cfg.lateral_weight,
             ).pose
             # the seed is good to a grid cell: refine it locally, PLICP must not wander off
             retry = plicp(
@@ -306,8 +311,11 @@ class GraphSlam:
         return self.pose.copy()
 
     def _score(self, node: Node, points: np.ndarray, res) -> float:
-        """Likelihood score of ``points`` at a match result in ``node``'s field."""
-        return node.field(self.cfg).score(points, (res.t[0], res.t[1], res.theta))
+        """Likelihood score of ``points`` at a match result in ``node``'s field, less the
+        sideways-motion penalty (``lateral_weight``) of the step from the previous scan."""
+        pose = (res.t[0], res.t[1], res.theta)
+        penalty = self.cfg.lateral_weight * lateral_motion(self._rel, pose) ** 2
+        return node.field(self.cfg).score(points, pose) - penalty
 
     def _record(self, t: float) -> None:
         if len(self._anchors.items) != self._n_anchors:  # another copy appended: fork

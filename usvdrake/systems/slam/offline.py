@@ -30,6 +30,13 @@ STREAM_CONFIG = GraphSlamConfig(correlative_trigger=1.0)
 #   its likelihood is 0.05 higher;
 #   PLICP refines a searched pose pairing points within 0.5 m only (from 1 m it wandered off
 #   a good seed: steps off by > 0.2 m or 3° went from 42 to 24 of 909, loops off);
+# * a candidate of that search or that choice scores 0.25 /m² × its sideways motion² less (the
+#   step off the arc through both poses, ``correlative.lateral_motion``): a wheeled robot cannot
+#   slide, and corridors had matched 30° turns on the spot as turns plus sideways jumps of up
+#   to 1 m. Intel 0.287 -> 0.153 m (30 -> 16 steps off by > 0.2 m or 3°), MIT-CSAIL 1.84 ->
+#   0.41 m, ACES 4.41 -> 3.70 m, Freiburg 079 0.085 -> 0.082 m; weights 0.1 / 0.5 / 1 / 2:
+#   Intel - / 0.172 / 0.201 / 0.186, MIT-CSAIL 0.36 / 4.92 (one 106° wrong turn) / - / -,
+#   ACES 3.37 / 3.70 / - / -;
 # * no dense links (a wrong one, Gaussian, bent the chain) and a node needs 20 matched points
 #   (open halls leave fewer than 40 returns);
 # * loops: one candidate per earlier pass within 4 m, searched within ±1.5 m / ±20°, the new
@@ -53,6 +60,7 @@ LOG_CONFIG = GraphSlamConfig(
     search_angular_window=1.6,
     search_from_rest=True,
     search_prior_margin=0.05,
+    lateral_weight=0.25,
     refine_max_distance=0.5,
     min_link_points=20,
     link_radius=0.0,
