@@ -3,13 +3,21 @@ and the plant-only model error behind them."""
 
 import dataclasses
 import json
+import os
 
 import numpy as np
 import pytest
 
 import usvdrake.campaign as campaign_mod
 import usvdrake.mission
-from usvdrake.campaign import RANGES, draw_summary, is_timing_key, randomise, run_campaign
+from usvdrake.campaign import (
+    RANGES,
+    _dask_client,
+    draw_summary,
+    is_timing_key,
+    randomise,
+    run_campaign,
+)
 from usvdrake.cli import main
 from usvdrake.diagrams.vessel_diagram import build_vessel_diagram
 from usvdrake.mission import run_mission
@@ -39,6 +47,28 @@ def campaign(tmp_path_factory):
         progress=False,
     )
     return out, c
+
+
+def test_local_workers_get_one_thread_and_the_parent_keeps_its_environment(monkeypatch):
+    """Dask's nanny writes its pre-spawn environment into this process too: the campaign puts
+    the parent's values back (a notebook's numba, whose thread pool is running, refused to
+    compile after a campaign had left NUMBA_NUM_THREADS=1 behind)."""
+    monkeypatch.setenv("MKL_NUM_THREADS", "2")
+    for unset in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS"):
+        monkeypatch.delenv(unset, raising=False)
+
+    def parent_kept() -> bool:
+        return os.environ["MKL_NUM_THREADS"] == "2" and not {
+            "NUMBA_NUM_THREADS",
+            "OMP_NUM_THREADS",
+        } & set(os.environ)
+
+    with _dask_client(1, None) as client:
+        seen = client.run(lambda: (os.environ.get("NUMBA_NUM_THREADS"), os.getpid()))
+        assert [v[0] for v in seen.values()] == ["1"]
+        assert all(v[1] != os.getpid() for v in seen.values())
+        assert parent_kept()
+    assert parent_kept()
 
 
 def test_campaign_accounts_for_every_run(campaign):

@@ -267,6 +267,7 @@ def _dask_client(workers: int, scheduler: str | None):
     # before the worker process starts, so numpy's BLAS sees it at import
     with (
         dask.config.set({"distributed.nanny.pre-spawn-environ": environ}),
+        _environ_kept(environ) as restore,
         LocalCluster(
             n_workers=workers,
             threads_per_worker=1,
@@ -277,7 +278,30 @@ def _dask_client(workers: int, scheduler: str | None):
         ) as cluster,
         Client(cluster) as client,
     ):
+        restore()
         yield client
+
+
+@contextmanager
+def _environ_kept(keys):
+    """Keeps this process's values of the environment variables ``keys``: a Dask nanny writes
+    its pre-spawn environment into the parent's ``os.environ`` too and never undoes it, so a
+    notebook that ran a campaign had NUMBA_NUM_THREADS=1 and its next numba compilation
+    raised (numba refuses a thread count other than its running pool's). Yields the restoring
+    function (call it once the workers are up); it runs again on exit (a restarted worker)."""
+    saved = {k: os.environ.get(k) for k in keys}
+
+    def restore() -> None:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+    try:
+        yield restore
+    finally:
+        restore()
 
 
 def run_campaign(
