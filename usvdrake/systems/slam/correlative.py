@@ -184,9 +184,9 @@ def _refine(
 ):
     """Branch and bound over the coarse cells in ``order`` (decreasing bound): the best fine
     (θ index, i, j) and its score; stops once a bound cannot beat the best. Translations within
-    ``ex_r`` cells of (ex_i, ex_j) are excluded (ex_r < 0: none). ``lat`` = (weight, x, y, and
-    per rotation −sin φ, cos φ): a fine cell's score loses weight · (lat[3][a] (x + i·res) +
-    lat[4][a] (y + j·res))², the arc prior of :func:`lateral_motion` (weight 0: none)."""
+    ``ex_r`` cells of (ex_i, ex_j) are excluded (ex_r < 0: none). ``lat`` = ([weight, lx, ly,
+    res], ns, nc), ns and nc per rotation: a fine cell's score loses weight · (ns[a] (lx +
+    i·res) + nc[a] (ly + j·res))², the arc prior of :func:`lateral_motion` (weight 0: none)."""
     rows, cols = fine.shape
     w, lx, ly, ns, nc, res = lat[0][0], lat[0][1], lat[0][2], lat[1], lat[2], lat[0][3]
     best, bi, bj, ba = -1.0, 0, 0, 0
@@ -277,10 +277,11 @@ def correlative_match(
     # (x, y) of fine cell (i, j) relative to the previous pose: (lx + i·res, ly + j·res)
     prev = np.zeros(3) if prior_from is None else np.asarray(prior_from, float)
     lx, ly = x0 + field.origin[0] - prev[0], y0 + field.origin[1] - prev[1]
-    phi = 0.5 * (prev[2] + thetas)
-    lat = (np.array([weight, lx, ly, res]), -np.sin(phi), np.cos(phi))
+    phi = 0.5 * (prev[2] + thetas)  # mean heading of the step, per rotation
+    ns, nc = -np.sin(phi), np.cos(phi)  # the sideways offset is ns·x + nc·y
+    lat = (np.array([weight, lx, ly, res]), ns, nc)
     if weight > 0:  # each coarse bound less the least penalty over its cell's translations
-        bounds = bounds - weight * _least_lateral_sq(lat[1], lat[2], lx, ly, res, k, nfx, ncx)
+        bounds = bounds - weight * _least_lateral_sq(ns, nc, lx, ly, res, k, nfx, ncx)
     flat = bounds.ravel()
     ca, ci, cj = np.unravel_index(np.arange(flat.size), bounds.shape)
     common = (field.fine, x0 / res, y0 / res, px, py, thetas, lat)
