@@ -9,6 +9,7 @@ from usvdrake.systems.slam.correlative import (
     correlative_match,
     distance_field,
     lateral_motion,
+    match_covariance,
 )
 from usvdrake.systems.slam.plicp import plicp
 from usvdrake.worlds.synthetic import HOKUYO, cluttered_room
@@ -157,3 +158,57 @@ def test_lateral_prior_picks_the_alias_reached_without_sliding():
         prior = correlative_match(*args, prior_from=(0.0, prev_y, 0.0), lateral_weight=0.25)
         assert abs(prior.pose[1] - prev_y) <= 0.05 and abs(prior.pose[0]) <= 0.05
         assert 0.8 * alone.score < prior.score < alone.score  # a slightly worse fit
+
+
+def test_match_covariance_spreads_along_a_wall_and_pins_across_it():
+    """Along an endless wall every shift scores alike, so the weights are uniform in x over the
+    span's grid: the x variance is the discrete uniform's, n(n+1)/3 · res², uncorrelated with y
+    and θ (the sums do not depend on x at all); across the wall and in rotation the points pin
+    the match to well under a cell."""
+    x = np.arange(-20.0, 20.0, 0.02)
+    ref = np.column_stack([x, np.full_like(x, 1.01)])
+    cur = ref[np.abs(x) < 5.0][::5]
+    # (a margin off whole cells: the wall off a cell boundary, where rounding would decide)
+    field = LikelihoodField.build(ref, 0.05, 0.1, margin=2.012)
+    cov = match_covariance(field, cur, (0.0, 0.0, 0.0), temperature=2.0, linear_span=1.0)
+    n = 20  # cells either side in 1 m
+    assert cov[0, 0] == pytest.approx(n * (n + 1) / 3 * 0.05**2, rel=1e-9)
+    assert abs(cov[0, 1]) < 1e-12 and abs(cov[0, 2]) < 1e-12
+    # across: about σ √(T/N) = 0.1 √(2/100) m (the quadratic fall of the sum near the wall)
+    assert 0.005 < np.sqrt(cov[1, 1]) < 0.02 and np.sqrt(cov[2, 2]) < np.deg2rad(0.5)
+    # the same weights computed one pose at a time by the field's own score
+    offsets = [
+        (dx, dy, dth)
+        for dx in 0.05 * np.arange(-n, n + 1)
+        for dy in 0.05 * np.arange(-n, n + 1)
+        for dth in 0.01 * np.arange(-5, 6)
+    ]
+    sums = np.array([field.score(cur, o) * len(cur) for o in offsets])
+    w = np.exp((sums - sums.max()) / 2.0)
+    w /= w.sum()
+    d = np.array(offsets) - w @ np.array(offsets)
+    assert np.allclose(cov, (w[:, None] * d).T @ d, rtol=1e-9, atol=1e-15)
+
+
+def test_match_covariance_grows_in_a_corridor_and_with_the_temperature():
+    """In the cluttered room every direction is pinned; in the corridor of plain walls the
+    length is free (variance near the span's uniform one) while across stays pinned. A flatter
+    landscape (higher temperature) only widens it."""
+    scene = cluttered_room()
+    room = match_covariance(
+        LikelihoodField.build(points(scene, (0.0, 0.0, 0.0)), 0.05, 0.1, margin=2.0),
+        points(scene, (0.3, 0.2, 0.1)),
+        (0.3, 0.2, 0.1),
+    )
+    assert np.all(np.sqrt(np.diag(room)[:2]) < 0.03)
+    x = np.arange(-20.0, 20.0, 0.02)  # two plain walls 3 m apart, longer than the view
+    walls = np.vstack([np.column_stack([x, np.full_like(x, y)]) for y in (-1.5, 1.5)])
+    field = LikelihoodField.build(walls, 0.05, 0.1, margin=2.012)
+    cur = walls[np.abs(walls[:, 0]) < 8.0][::3] - [0.3, 0.0]  # seen from x = 0.3
+    covs = [match_covariance(field, cur, (0.3, 0.0, 0.0), temperature=t) for t in (1.0, 8.0)]
+    for cov in covs:
+        assert np.sqrt(cov[0, 0]) > 0.4  # uniform over ± 1 m: 0.59 m
+        assert np.sqrt(cov[1, 1]) < 0.03
+    assert np.all(np.diag(covs[1]) >= np.diag(covs[0]) * (1.0 - 1e-9))
+    with pytest.raises(ValueError, match="no current points"):
+        match_covariance(field, np.zeros((0, 2)), (0.0, 0.0, 0.0))

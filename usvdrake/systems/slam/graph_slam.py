@@ -7,7 +7,9 @@
   ± ``search_angular_window``, which wins if its likelihood is ``search_prior_margin`` higher.
 * **Nodes**: a new node when the match exceeds ``node_translation`` or ``node_rotation``. Its
   consecutive constraint (to the previous node) carries the Censi covariance (002 eqs. 4-10)
-  and is robustified with Barron's kernel (002 eqs. 13-14, ``alpha``, ``c``); it is also
+  — or, with ``landscape_temperature``, the spread of the tracking field's score around the
+  match (Olson 2009 §III-C), which is wide where the scene leaves a direction free — and is
+  robustified with Barron's kernel (002 eqs. 13-14, ``alpha``, ``c``); it is also
   densely linked (plain Gaussian) to the window's nodes within ``link_radius`` whose match
   converges with a small residual.
 * **Optimisation**: Levenberg-Marquardt (gtsam, at most 100 iterations, as 002 §V-A) over the
@@ -41,7 +43,12 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from usvdrake.systems.slam.censi_covariance import plicp_covariance
-from usvdrake.systems.slam.correlative import LikelihoodField, correlative_match, lateral_motion
+from usvdrake.systems.slam.correlative import (
+    LikelihoodField,
+    correlative_match,
+    lateral_motion,
+    match_covariance,
+)
 from usvdrake.systems.slam.occupancy_mapping import LogOddsGrid
 from usvdrake.systems.slam.plicp import plicp, rot
 from usvdrake.systems.slam.robust_kernel import gtsam_barron
@@ -101,6 +108,11 @@ class GraphSlamConfig:
     alpha: float = 0.0  # Barron α of the robustified constraints (0: Cauchy)
     c: float = 1.0  # Barron scale c (in units of the whitened error)
     range_sigma: float = 0.02  # [m] range noise for the Censi covariance
+    # > 0: consecutive constraints take the spread of the tracking field's score around the
+    # match at this temperature (Olson 2009 §III-C, correlative.match_covariance) above the
+    # min_sigma floor, instead of Censi's closed form, which stays centimetre-small along a
+    # corridor (ours, not 002's; 0: Censi's)
+    landscape_temperature: float = 0.0
     min_sigma: list[float] = field(default_factory=lambda: [0.01, 0.01, 0.005])  # [m, m, rad] floor
     max_iterations: int = 100  # LM steps (002 §V-A)
     # De-skew each scan to its last beam with the last scan-to-scan motion as a constant
@@ -296,7 +308,7 @@ class GraphSlam:
             or abs(rel[2]) > self.cfg.node_rotation
         ):
             cov = (
-                self._covariance(last.points, points, res)
+                self._tracking_covariance(last, points, res)
                 if res.n_valid >= self.cfg.min_link_points
                 else None
             )
@@ -331,6 +343,17 @@ class GraphSlam:
             return np.zeros(0), np.zeros((0, 3))
         t = np.array([i[0] for i in items])
         return t, np.array([compose(self.nodes[k].pose, rel) for _, k, rel in items])
+
+    def _tracking_covariance(self, node: Node, points: np.ndarray, res) -> np.ndarray:
+        """The consecutive constraint's covariance: Censi's, or with ``landscape_temperature``
+        the spread of ``node``'s tracking field (:func:`match_covariance`) above the
+        ``min_sigma`` floor."""
+        if self.cfg.landscape_temperature <= 0:
+            return self._covariance(node.points, points, res)
+        pose = (res.t[0], res.t[1], res.theta)
+        field = node.field(self.cfg)
+        spread = match_covariance(field, points, pose, self.cfg.landscape_temperature)
+        return spread + np.diag(np.square(self.cfg.min_sigma))
 
     def _covariance(self, ref, cur, res) -> np.ndarray:
         try:
