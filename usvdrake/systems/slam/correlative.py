@@ -103,6 +103,15 @@ def lateral_motion(start, end) -> float:
     return float(-np.sin(phi) * (end[0] - start[0]) + np.cos(phi) * (end[1] - start[1]))
 
 
+def _evenly(current, max_points: int, caller: str) -> np.ndarray:
+    """At most ``max_points`` of the current points (M × 2), every k-th; a ValueError naming
+    ``caller`` if there are none."""
+    pts = np.asarray(current, float)
+    if len(pts) == 0:
+        raise ValueError(f"{caller}: no current points")
+    return pts[:: max(1, -(-len(pts) // max_points))]
+
+
 class CorrelativeMatch(NamedTuple):
     pose: np.ndarray  # (x [m], y [m], θ [rad]) of the current points in the field's frame
     score: float  # mean likelihood of the points there, in [0, 1]
@@ -255,10 +264,7 @@ def correlative_match(
     :func:`lateral_motion`² [1/m²] (the coarse bounds by its least value over their cell, so
     the search stays exact): of two poses a corridor fits alike, the one reached without
     sliding sideways wins. The returned ``score`` is the likelihood alone."""
-    pts = np.asarray(current, float)
-    if len(pts) == 0:
-        raise ValueError("correlative_match: no current points")
-    pts = pts[:: max(1, -(-len(pts) // max_points))]
+    pts = _evenly(current, max_points, "correlative_match")
     res, k = field.resolution, field.k
     if angular_step is None:
         reach = float(np.max(np.hypot(pts[:, 0], pts[:, 1])))
@@ -340,10 +346,7 @@ def match_covariance(
     floor). Where the scene leaves a direction free (a corridor's length), the weights stay
     flat along it and the variance grows to the span's uniform one, where Censi's closed form
     (002 eqs. 4-10) trusts the few far points and stays centimetre-small."""
-    pts = np.asarray(current, float)
-    if len(pts) == 0:
-        raise ValueError("match_covariance: no current points")
-    pts = pts[:: max(1, -(-len(pts) // max_points))]
+    pts = _evenly(current, max_points, "match_covariance")
     res = field.resolution
     n = int(np.floor(linear_span / res))
     m = int(np.floor(angular_span / angular_step))

@@ -344,6 +344,11 @@ class GraphSlam:
         t = np.array([i[0] for i in items])
         return t, np.array([compose(self.nodes[k].pose, rel) for _, k, rel in items])
 
+    @property
+    def _floor(self) -> np.ndarray:
+        """The constraints' covariance floor, diag(``min_sigma``²)."""
+        return np.diag(np.square(self.cfg.min_sigma))
+
     def _tracking_covariance(self, node: Node, points: np.ndarray, res) -> np.ndarray:
         """The consecutive constraint's covariance: Censi's, or with ``landscape_temperature``
         the spread of ``node``'s tracking field (:func:`match_covariance`) above the
@@ -353,17 +358,16 @@ class GraphSlam:
         pose = (res.t[0], res.t[1], res.theta)
         field = node.field(self.cfg)
         spread = match_covariance(field, points, pose, self.cfg.landscape_temperature)
-        return spread + np.diag(np.square(self.cfg.min_sigma))
+        return spread + self._floor
 
     def _covariance(self, ref, cur, res) -> np.ndarray:
         try:
             cov = plicp_covariance(ref, cur, res, self.cfg.range_sigma)
         except np.linalg.LinAlgError:
-            cov = np.diag(np.square(self.cfg.min_sigma)) * 100.0
-        floor = np.diag(np.square(self.cfg.min_sigma))
+            cov = self._floor * 100.0
         if not np.all(np.isfinite(cov)):
-            return floor * 100.0
-        return cov + floor
+            return self._floor * 100.0
+        return cov + self._floor
 
     # --- nodes and constraints ----------------------------------------------------------------
     def _add_node(self, pose, points, ranges, angles, t) -> Node:
@@ -380,7 +384,7 @@ class GraphSlam:
         node = self._add_node(self.pose.copy(), points, ranges, angles, t)
         k = len(self.nodes) - 1
         if cov is None:
-            cov = np.diag(np.square(self.cfg.min_sigma)) * 100.0
+            cov = self._floor * 100.0
         self.constraints.append(Constraint(prev, k, rel.copy(), cov, True, "consecutive"))
         self._rel = np.zeros(3)
         lo = max(0, k - self.cfg.window)
@@ -510,7 +514,7 @@ class GraphSlam:
     def pose_covariance(self) -> np.ndarray:
         """The Censi covariance of the latest node's consecutive constraint."""
         cons = [c for c in self.constraints if c.kind == "consecutive"]
-        return cons[-1].cov if cons else np.diag(np.square(self.cfg.min_sigma))
+        return cons[-1].cov if cons else self._floor
 
     def occupancy(self):
         return self.map.to_occupancy_grid()
