@@ -407,3 +407,36 @@ def test_a_searched_loop_is_refined_against_the_candidates_submap():
     assert np.hypot(*(z[:2] - true_z[:2])) < 0.02
     assert abs(z[2] - true_z[2]) < np.deg2rad(0.5)
     assert np.all(np.linalg.eigvalsh(slam.constraints[-1].cov) > 0)
+
+
+def test_without_a_time_base_the_search_is_not_outweighed_by_the_motion_model():
+    """``search_prior_margin`` favours PLICP from the constant-velocity guess over the
+    correlative search, but only when the scans' stamps give that guess a time base. Here the
+    sensor steps forward and turns, then returns to the start: the guess (the step once more) is
+    1.8 m and 69° off. With a margin no score can overcome, timed scans keep the guess's match;
+    scans with identical stamps (MIT-CSAIL's corrected log) take the search's."""
+    cfg = GraphSlamConfig(
+        correlative_trigger=0.0,
+        search_prior_margin=1.0,
+        search_from_rest=True,
+        node_translation=2.0,  # no node before the return: all three match the first scan
+        node_rotation=1.0,
+        map_size=[20.0, 20.0],
+        map_origin=[-10.0, -10.0],
+    )
+    poses = [np.zeros(3), np.array([0.9, 0.0, 0.6]), np.zeros(3)]
+    scans = []
+    for p in poses:
+        r = cast(ROOM, HOKUYO, [0.0], p[:2], 1.0, p[2], 30.0)[0]
+        v = np.isfinite(r)
+        a = HOKUYO.azimuths
+        scans.append((np.column_stack([r[v] * np.cos(a[v]), r[v] * np.sin(a[v])]), r, a))
+    final = {}
+    for stamps in ((0.0, 0.1, 0.2), (5.0, 5.0, 5.0)):
+        slam = GraphSlam(cfg)
+        for (pts, r, a), t in zip(scans, stamps, strict=True):
+            est = slam.process(pts, r, a, t)
+        final[stamps[0]] = est
+    assert np.hypot(*final[0.0][:2]) > 0.3  # timed: the margin kept the guess's match
+    assert np.hypot(*final[5.0][:2]) < 0.03  # untimed: the search found the start again
+    assert abs(final[5.0][2]) < np.deg2rad(0.5)

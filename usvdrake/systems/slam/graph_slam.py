@@ -4,7 +4,8 @@
   starting from the previous relative motion; the pose is the node's pose composed with it.
   A poor match (``correlative_trigger``; 0: every scan) is re-seeded by the branch-and-bound
   correlative search (Olson 2009, :mod:`correlative`) over ± ``search_linear_window`` /
-  ± ``search_angular_window``, which wins if its likelihood is ``search_prior_margin`` higher.
+  ± ``search_angular_window``, which wins if its likelihood is ``search_prior_margin`` higher
+  (if the scans' stamps give the motion a time base; otherwise the higher likelihood wins).
 * **Nodes**: a new node when the match exceeds ``node_translation`` or ``node_rotation``. Its
   consecutive constraint (to the previous node) carries the Censi covariance (002 eqs. 4-10)
   — or, with ``landscape_temperature``, the spread of the tracking field's score around the
@@ -69,7 +70,9 @@ class GraphSlamConfig:
     search_from_rest: bool = False  # centre it on no motion (True) or constant velocity
     # the searched pose replaces PLICP's from the constant-velocity guess only if its
     # likelihood score is higher by this much: along a featureless corridor the two tie and
-    # the motion model decides (Olson 2009's motion prior, as a margin)
+    # the motion model decides (Olson 2009's motion prior, as a margin). A scan stamped no
+    # later than the previous one (a log with identical stamps) gives the motion no time
+    # base to extrapolate over: there the higher score wins
     search_prior_margin: float = 0.02
     # [1/m²] the search's and that choice's scores lose this × the step's sideways motion²
     # (correlative.lateral_motion: 0 along any arc; for vehicles that cannot slide; 0: off)
@@ -267,6 +270,8 @@ class GraphSlam:
                 prior_from=self._rel,
                 lateral_weight=self.cfg.lateral_weight,
             ).pose
+            timed = self._last_t is not None and t > self._last_t
+            margin = self.cfg.search_prior_margin if timed else 0.0
             # the seed is good to a grid cell: refine it locally, PLICP must not wander off
             retry = plicp(
                 last.points,
@@ -277,8 +282,7 @@ class GraphSlam:
             )
             if retry.n_valid >= self.cfg.min_link_points and (
                 res.n_valid < self.cfg.min_link_points
-                or self._score(last, points, retry)
-                > self._score(last, points, res) + self.cfg.search_prior_margin
+                or self._score(last, points, retry) > self._score(last, points, res) + margin
             ):
                 res = retry
         failed = (
