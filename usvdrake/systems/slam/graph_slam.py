@@ -270,8 +270,6 @@ class GraphSlam:
                 prior_from=self._rel,
                 lateral_weight=self.cfg.lateral_weight,
             ).pose
-            timed = self._last_t is not None and t > self._last_t
-            margin = self.cfg.search_prior_margin if timed else 0.0
             # the seed is good to a grid cell: refine it locally, PLICP must not wander off
             retry = plicp(
                 last.points,
@@ -280,6 +278,9 @@ class GraphSlam:
                 tree=last.tree,
                 max_distance=self.cfg.refine_max_distance,
             )
+            # no time since the last scan (identical stamps): no motion model to favour
+            timed = self._last_t is not None and t > self._last_t
+            margin = self.cfg.search_prior_margin if timed else 0.0
             if retry.n_valid >= self.cfg.min_link_points and (
                 res.n_valid < self.cfg.min_link_points
                 or self._score(last, points, retry) > self._score(last, points, res) + margin
