@@ -2,12 +2,19 @@
 
 import bz2
 import gzip
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from usvdrake.logs.carmen import beam_increment, read_carmen, read_odometry, read_poses
+from usvdrake.logs.carmen import (
+    associate_scans,
+    beam_increment,
+    read_carmen,
+    read_odometry,
+    read_poses,
+)
 from usvdrake.sensors.messages import LaserScan
 
 INTEL = Path(__file__).parent / "data" / "carmen" / "intel-first200.clf.bz2"
@@ -90,3 +97,19 @@ def test_beam_increments():
     assert beam_increment(180) == pytest.approx(np.deg2rad(1.0))
     assert beam_increment(360) == pytest.approx(np.deg2rad(0.5))
     assert beam_increment(361) == pytest.approx(np.deg2rad(0.5))
+
+
+def test_corrected_scans_are_found_in_the_raw_log_by_their_ranges():
+    raw = list(read_carmen(INTEL))
+    picked = [3, 10, 11, 57, 120, 199]
+    # a corrected log: some raw scans, re-stamped from 0, with other poses
+    corrected = [raw[i]._replace(timestamp=0.1 * k) for k, i in enumerate(picked)]
+    np.testing.assert_array_equal(associate_scans(raw, corrected), picked)
+    # a scan the raw log does not hold (one range moved by 2 cm) pairs with nothing
+    moved = raw[57].scan.ranges.copy()
+    moved[90] += 0.02
+    odd = corrected[3]._replace(scan=replace(raw[57].scan, ranges=moved))
+    assert list(associate_scans(raw, [corrected[2], odd, corrected[4]])) == [11, -1, 120]
+    # the same scan twice (a robot at rest) pairs with the copies in order
+    twice = raw[:5] + [raw[2]] + raw[5:]
+    assert list(associate_scans(twice, [raw[2], raw[3], raw[2]])) == [2, 3, 5]

@@ -1,12 +1,16 @@
 """Offline 2D SLAM on a real CARMEN log piece (tests/data/carmen: Intel lab, CC-BY 3.0)."""
 
+import bz2
+import gzip
 import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 
-from usvdrake.analysis.trajectory_metrics import read_tum
+from usvdrake.analysis.trajectory_metrics import ate, read_tum, trajectory_from_planar
 from usvdrake.cli import main
+from usvdrake.logs.carmen import read_poses
 
 LOG = Path(__file__).parent / "data" / "carmen" / "intel-first200.clf.bz2"
 
@@ -22,6 +26,35 @@ def test_slam2d_cli_runs_a_real_log_piece(tmp_path):
     assert (tmp_path / "map.png").stat().st_size > 1000
     # scored against the log's own (odometry) poses: the robot barely moves in these 200 scans
     assert metrics["ate_m"] < 0.5
+
+
+def test_slam2d_scores_a_raw_log_against_its_corrected_log_scan_by_scan(tmp_path):
+    """A corrected log re-stamps a subset of the raw log's scans from 0 (no stamp matches):
+    its scans are found in the raw run by their ranges and scored pose against pose."""
+    lines = [ln for ln in bz2.open(LOG, "rt") if ln.startswith("FLASER")]
+    corrected, picked = [], range(0, 200, 4)
+    for k, i in enumerate(picked):
+        tokens = lines[i].split()
+        n = int(tokens[1])
+        tokens[2 + n] = f"{0.5 + 0.01 * k:.3f}"  # a "corrected" laser pose: drifting in x
+        tokens[8 + n] = f"{0.2 * k:.3f}"  # stamped from 0
+        corrected.append(" ".join(tokens) + "\n")
+    ref = tmp_path / "corrected.log.gz"
+    with gzip.open(ref, "wt") as f:
+        f.writelines(corrected)
+    out = tmp_path / "run"
+    assert main(["slam2d", str(LOG), "--out", str(out), "--quiet", "--reference", str(ref)]) == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["ate_association"] == "scan" and metrics["ate_pairs"] == len(picked)
+    # the same number from the written trajectory at the picked rows, against the new poses
+    _, xyz, quat = read_tum(out / "trajectory.tum")
+    yaw = 2 * np.arctan2(quat[:, 2], quat[:, 3])
+    est = np.column_stack([xyz[:, :2], yaw])[list(picked)]
+    _, poses = read_poses(ref)
+    k = np.arange(len(picked), dtype=float)
+    expected = ate(trajectory_from_planar(k, est), trajectory_from_planar(k, poses), align="se2")
+    assert metrics["ate_m"] == pytest.approx(expected["ate_rmse_m"], rel=1e-6)
+    assert metrics["ate_m"] > 0.05  # the drift the corrected poses carry is seen
 
 
 def test_slam2d_missing_log_is_one_line(tmp_path, capsys):

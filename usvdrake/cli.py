@@ -337,7 +337,12 @@ def make_parser() -> argparse.ArgumentParser:
         "log", help="CARMEN .clf/.log (plain, gzip or bzip2), ROS 1 .bag or ROS 2 bag folder"
     )
     m.add_argument("--out", default="out/slam2d", help="output folder")
-    m.add_argument("--reference", default=None, help="a log whose poses are ground truth (ATE)")
+    m.add_argument(
+        "--reference",
+        default=None,
+        help="a log whose poses are ground truth (ATE): a corrected CARMEN log pairs with the "
+        "raw log's scans by their ranges, anything else by time stamp",
+    )
     m.add_argument("--resolution", type=float, default=0.1, help="map cell size [m]")
     m.add_argument("--max-scans", type=int, default=None, help="stop after this many scans")
     m.add_argument(

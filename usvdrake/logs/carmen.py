@@ -16,6 +16,7 @@ have the same FLASER lines with SLAM-corrected poses, used as approximate ground
 Files may be plain, bzip2 or gzip; the compression is recognised by its magic bytes.
 """
 
+import bisect
 import bz2
 import gzip
 import io
@@ -124,3 +125,27 @@ def read_odometry(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
                 poses.append([float(v) for v in tokens[1:4]])
                 stamps.append(float(tokens[7]))
     return np.array(stamps, dtype=float), np.array(poses, dtype=float).reshape(-1, 3)
+
+
+def associate_scans(scans, reference) -> np.ndarray:
+    """For each record of ``reference`` (a corrected log's), the index of the record in
+    ``scans`` (the raw log's) with the same ranges to 1 cm, or −1. A corrected log's scans are
+    a subset of its raw log's, re-stamped (its stamps start near 0): the ranges name a scan
+    where the time does not. Matches advance in log order, so a scan repeated exactly (a robot
+    at rest) pairs with its first copy after the previous match."""
+
+    def key(rec) -> bytes:
+        r = np.asarray(rec.scan.ranges, float)
+        return np.round(np.where(np.isfinite(r), r, -1.0) * 100.0).astype(np.int64).tobytes()
+
+    where: dict[bytes, list[int]] = {}
+    for i, rec in enumerate(scans):
+        where.setdefault(key(rec), []).append(i)
+    out = np.full(len(reference), -1, dtype=int)
+    last = -1
+    for k, rec in enumerate(reference):
+        found = where.get(key(rec), [])
+        j = bisect.bisect_right(found, last)
+        if j < len(found):
+            out[k] = last = found[j]
+    return out

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from usvdrake.logs.carmen import read_carmen, read_poses
+from usvdrake.logs.carmen import associate_scans, read_carmen
 from usvdrake.systems.slam.graph_slam import GraphSlam, GraphSlamConfig, compose
 
 GARBAGE_KINDS = ("random", "half_empty", "nan")
@@ -210,6 +210,7 @@ def run_slam2d(
         scans = scans[:max_scans]
     if not scans:
         raise ConfigError(log, "", "laser scans", "none")
+    clean = scans  # the reference names scans by their ranges, garbage or not
     corrupted = np.zeros(0, int)
     if garbage > 0:
         scans, corrupted = corrupt_scans(scans, garbage, seed)
@@ -257,23 +258,40 @@ def run_slam2d(
         "realtime_factor": duration / wall if wall > 0 and _stamps_advance(scans) else None,
     }
     if reference is not None:
-        if Path(reference).suffix == ".mcap":
-            from usvdrake.logs.mission_log import read_log_states
-
-            t_ref, states = read_log_states(reference)
-            p_ref = states[:, :3]
-        else:
-            t_ref, p_ref = read_poses(reference)
+        t_est, p_est, t_ref, p_ref, how = _reference_pairs(clean, stamps, poses, reference)
         result = ate(
-            trajectory_from_planar(stamps, poses),
+            trajectory_from_planar(t_est, p_est),
             trajectory_from_planar(t_ref, p_ref),
             align="se2",
             max_dt=0.05,
         )
         metrics["ate_m"] = result["ate_rmse_m"]
         metrics["ate_pairs"] = result["ate_pairs"]
+        metrics["ate_association"] = how
     (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
     return metrics
+
+
+def _reference_pairs(scans, stamps, poses, reference):
+    """(est. stamps, est. poses, ref. stamps, ref. poses, how) to score a run against
+    ``reference``. A CARMEN reference whose scans are (at least half) the run's own, by their
+    ranges (:func:`associate_scans`: a corrected log against its raw log, whose stamps differ),
+    pairs scan by scan (how = "scan", stamped by the reference's order); otherwise (a mission
+    log, another recording) the ATE associates by time stamp (how = "time")."""
+    if Path(reference).suffix == ".mcap":
+        from usvdrake.logs.mission_log import read_log_states
+
+        t_ref, states = read_log_states(reference)
+        return stamps, poses, t_ref, states[:, :3], "time"
+    ref = list(read_carmen(reference, pose="laser"))
+    t_ref = np.array([rec.timestamp for rec in ref], float)
+    p_ref = np.array([rec.odometry_pose for rec in ref], float).reshape(-1, 3)
+    pairs = associate_scans(scans, ref)
+    hit = pairs >= 0
+    if hit.sum() < max(3, len(ref) / 2):
+        return stamps, poses, t_ref, p_ref, "time"
+    order = np.arange(hit.sum(), dtype=float)
+    return order, poses[pairs[hit]], order, p_ref[hit], "scan"
 
 
 def _write_map_png(path: Path, grid) -> None:
