@@ -8,7 +8,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from usvdrake.analysis.trajectory_metrics import ate, read_tum, trajectory_from_planar
+from usvdrake.analysis.trajectory_metrics import (
+    ate,
+    read_trajectory,
+    read_tum,
+    se3_to_planar,
+    trajectory_from_planar,
+)
 from usvdrake.cli import main
 from usvdrake.logs.carmen import read_poses
 
@@ -47,9 +53,7 @@ def test_slam2d_scores_a_raw_log_against_its_corrected_log_scan_by_scan(tmp_path
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["ate_association"] == "scan" and metrics["ate_pairs"] == len(picked)
     # the same number from the written trajectory at the picked rows, against the new poses
-    _, xyz, quat = read_tum(out / "trajectory.tum")
-    yaw = 2 * np.arctan2(quat[:, 2], quat[:, 3])
-    est = np.column_stack([xyz[:, :2], yaw])[list(picked)]
+    est = se3_to_planar(read_trajectory(out / "trajectory.tum").poses)[list(picked)]
     _, poses = read_poses(ref)
     k = np.arange(len(picked), dtype=float)
     expected = ate(trajectory_from_planar(k, est), trajectory_from_planar(k, poses), align="se2")
