@@ -70,6 +70,30 @@ def test_pose_algebra():
     np.testing.assert_allclose(between(a, compose(a, b)), b, atol=1e-12)
 
 
+def test_between_on_stacks_is_between_row_by_row():
+    rng = np.random.default_rng(0)
+    a, b = rng.normal(size=(5, 3)) * 3, rng.normal(size=(5, 3)) * 3
+    rows = np.array([between(x, y) for x, y in zip(a, b, strict=True)])
+    np.testing.assert_array_equal(between(a, b), rows)
+    assert np.all(np.abs(rows[:, 2]) <= np.pi)
+
+
+def test_the_bookkeeping_the_window_and_the_loop_search_read_matches_the_graph(noisy_loop):
+    """A window's optimisation reads the constraints from its first node's ``first_constraint``
+    on and the loop search the positions' array: every constraint is added with its newest
+    node as ``j`` (so none touching the window lies before), the array holds every node's
+    current position, and every scan is in the map at its node's pose."""
+    slam = noisy_loop[0]
+    for n_c, c in enumerate(slam.constraints):
+        assert c.i < c.j and slam.nodes[c.j].first_constraint <= n_c
+        assert c.j == len(slam.nodes) - 1 or n_c < slam.nodes[c.j + 1].first_constraint
+    np.testing.assert_array_equal(slam._xy, slam.trajectory()[:, :2])
+    for node in slam.nodes:
+        d = between(node.rendered_pose, node.pose)
+        assert np.hypot(d[0], d[1]) <= slam.cfg.rerender_translation
+        assert abs(d[2]) <= slam.cfg.rerender_rotation
+
+
 def test_loop_is_closed_and_the_trajectory_is_accurate(noisy_loop):
     slam, est, truth = noisy_loop
     err = np.hypot(est[:, 0] - truth[:, 0], est[:, 1] - truth[:, 1])

@@ -156,12 +156,12 @@ def body_pose(sensor_pose: np.ndarray, mount: np.ndarray) -> np.ndarray:
 
 
 def between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a⁻¹ ⊕ b: b expressed in a's frame."""
-    c, s = np.cos(a[2]), np.sin(a[2])
-    d = b[:2] - a[:2]
-    return np.array(
-        [c * d[0] + s * d[1], -s * d[0] + c * d[1], np.angle(np.exp(1j * (b[2] - a[2])))]
-    )
+    """a⁻¹ ⊕ b: b expressed in a's frame; for stacks of poses (… × 3) row by row."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    dx, dy = b[..., 0] - a[..., 0], b[..., 1] - a[..., 1]
+    dth = np.angle(np.exp(1j * (b[..., 2] - a[..., 2])))
+    return np.stack([c * dx + s * dy, -s * dx + c * dy, dth], axis=-1)
 
 
 class _AppendLog:
@@ -180,6 +180,9 @@ class Node:
     angles: np.ndarray
     time: float
     rendered_pose: np.ndarray | None = None  # the pose its scan is in the map with
+    # index in GraphSlam.constraints of its first constraint: every constraint is added with
+    # its newest node as ``j``, so the constraints touching nodes ≥ k are those from node k's on
+    first_constraint: int = 0
     tree: cKDTree | None = None
     _field: LikelihoodField | None = None
 
@@ -220,6 +223,8 @@ class GraphSlam:
         self._twist: np.ndarray | None = None  # (v_x, v_y, ω) of the sensor, smoothed
         self._fail_streak = 0  # tracking matches failed in a row
         self._rejected: frozenset[int] = frozenset()  # loop constraints GNC called outliers
+        # [m] (x, y) of every node, kept with Node.pose: the loop candidates' distances
+        self._xy = np.zeros((0, 2))
         res = cfg.map_resolution
         shape = (int(cfg.map_size[1] / res), int(cfg.map_size[0] / res))
         self.map = LogOddsGrid(tuple(cfg.map_origin), res, shape)
@@ -377,7 +382,9 @@ class GraphSlam:
     # --- nodes and constraints ----------------------------------------------------------------
     def _add_node(self, pose, points, ranges, angles, t) -> Node:
         node = Node(pose, points, ranges, angles, t, tree=cKDTree(points))
+        node.first_constraint = len(self.constraints)
         self.nodes.append(node)
+        self._sync_xy([len(self.nodes) - 1])
         self._render(node)
         return node
 
@@ -407,6 +414,17 @@ class GraphSlam:
             self.stats["loops"] += 1
             self.full_pending = True  # the whole graph, at the caller's pace (optimise_pending)
 
+    def _sync_xy(self, changed=()) -> None:
+        """Bring the node positions' array up to date after the nodes ``changed`` got a new
+        pose (all of them if nodes were added behind its back): the loop candidates' search
+        reads it instead of gathering every node's pose per new node."""
+        if len(self._xy) == len(self.nodes) - 1 and list(changed) == [len(self.nodes) - 1]:
+            self._xy = np.vstack([self._xy, self.nodes[-1].pose[:2]])
+        elif len(self._xy) != len(self.nodes):
+            self._xy = np.array([n.pose[:2] for n in self.nodes]).reshape(-1, 2)
+        elif len(changed):
+            self._xy[list(changed)] = [self.nodes[k].pose[:2] for k in changed]
+
     def _loop_candidates(self, k: int) -> list[int]:
         """Older nodes (index gap ≥ ``loop_index_gap``) within ``loop_radius`` of node k; with
         ``loop_per_chain``, only the nearest of each run of consecutive such nodes (one pass
@@ -414,8 +432,8 @@ class GraphSlam:
         old = np.arange(max(0, k - self.cfg.loop_index_gap))
         if not len(old):
             return []
-        poses = np.array([self.nodes[i].pose[:2] for i in old])
-        d = np.hypot(*(poses - self.nodes[k].pose[:2]).T)
+        self._sync_xy()
+        d = np.hypot(*(self._xy[old] - self.nodes[k].pose[:2]).T)
         near = old[d <= self.cfg.loop_radius]
         if not self.cfg.loop_per_chain or not len(near):
             return list(near)
@@ -518,8 +536,10 @@ class GraphSlam:
 
     def pose_covariance(self) -> np.ndarray:
         """The Censi covariance of the latest node's consecutive constraint."""
-        cons = [c for c in self.constraints if c.kind == "consecutive"]
-        return cons[-1].cov if cons else self._floor
+        for c in reversed(self.constraints):
+            if c.kind == "consecutive":
+                return c.cov
+        return self._floor
 
     def occupancy(self):
         return self.map.to_occupancy_grid()
@@ -547,7 +567,11 @@ class GraphSlam:
         values = gtsam.Values()
         used, inliers, loops = set(), [], []
         loop_floor = np.diag(np.square(self.cfg.loop_min_sigma))
-        for n_c, c in enumerate(self.constraints):
+        # a window's constraints are the list's tail (Node.first_constraint): not a scan of
+        # the whole list per node, which on Intel's raw log (10 700 nodes) cost minutes
+        start = 0 if full else self.nodes[min(active)].first_constraint
+        for n_c in range(start, len(self.constraints)):
+            c = self.constraints[n_c]
             if not (c.i in active or c.j in active):
                 continue
             if c.kind == "loop" and (gnc or n_c in self._rejected):
@@ -585,24 +609,31 @@ class GraphSlam:
             self.stats["rejected_loops"] = len(self._rejected)
         else:
             result = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
-        for k in used | {anchor}:
+        solved = sorted(used | {anchor})
+        for k in solved:
             p = result.atPose2(k)
             self.nodes[k].pose = np.array([p.x(), p.y(), p.theta()])
+        self._sync_xy(solved)
         self.pose = compose(self.nodes[-1].pose, self._rel)
-        for node in self.nodes:
-            self._rerender_if_moved(node)
+        # only the nodes just solved for can have moved since their last check
+        self._rerender_moved(solved)
 
     # --- map ------------------------------------------------------------------------------------
     def _render(self, node: Node) -> None:
         self.map.insert_scan(node.pose, node.ranges, node.angles, self.cfg.max_range)
         node.rendered_pose = node.pose.copy()
 
-    def _rerender_if_moved(self, node: Node) -> None:
-        d = between(node.rendered_pose, node.pose)
-        if (
-            np.hypot(d[0], d[1]) > self.cfg.rerender_translation
-            or abs(d[2]) > self.cfg.rerender_rotation
-        ):
+    def _rerender_moved(self, indices) -> None:
+        """Re-render the scans of the nodes ``indices`` whose pose has moved from the one they
+        were rendered at by more than ``rerender_translation`` / ``rerender_rotation``."""
+        if not len(indices):
+            return
+        nodes = [self.nodes[k] for k in indices]
+        d = between([n.rendered_pose for n in nodes], [n.pose for n in nodes])
+        moved = (np.hypot(d[:, 0], d[:, 1]) > self.cfg.rerender_translation) | (
+            np.abs(d[:, 2]) > self.cfg.rerender_rotation
+        )
+        for node in (n for n, m in zip(nodes, moved, strict=True) if m):
             self.map.remove_scan(node.rendered_pose, node.ranges, node.angles, self.cfg.max_range)
             self._render(node)
 
@@ -621,6 +652,7 @@ class GraphSlam:
             n.pose = n.pose.copy()
             n.rendered_pose = None if n.rendered_pose is None else n.rendered_pose.copy()
         other.constraints = list(self.constraints)
+        other._xy = self._xy.copy()
         other.pose, other._rel, other._last_step = (
             self.pose.copy(),
             self._rel.copy(),
