@@ -6,8 +6,9 @@ Runs ``usvdrake slam2d``'s offline runner (:func:`usvdrake.systems.slam.offline.
 ACES, subsampled scans with SLAM-corrected poses) and scores it by ATE against the log's own
 poses after an SE(2) alignment. Prints one JSON object: per log ``ate_m`` (target ≤ 0.10),
 ``realtime_factor`` (log duration / wall time; ≥ 1 keeps up, ``keeps_up``; None where the
-stamps do not measure time), nodes, loops accepted and rejected by GNC, full optimisations
-(at most one per 3 s of log time); and ``reached`` per log.
+stamps do not measure time) and ``lag_max_s`` (played at the log's pace, the most a scan's
+processing ends behind its arrival: a bounded lag keeps up), nodes, loops accepted and
+rejected by GNC, full optimisations (at most one per 3 s of log time); and ``reached`` per log.
 
 ``--raw``: run on the raw logs instead (``intel.clf.bz2`` … beside the ``corrected`` folder:
 every scan the robot recorded, with its own clock), the command the issue names, scored against
@@ -66,6 +67,8 @@ def main() -> None:
                 "wall_time_s": m["wall_time_s"],
                 "full_optimisations": m["full_optimisations"],
                 "realtime_factor": m["realtime_factor"],
+                # [s] most a scan's processing ended behind its arrival, played at the log's pace
+                "lag_max_s": m.get("lag_max_s"),
                 # None: the log's stamps do not measure time (MIT-CSAIL's corrected log)
                 "keeps_up": None if m["realtime_factor"] is None else m["realtime_factor"] >= 1.0,
             }

@@ -32,6 +32,20 @@ def test_slam2d_cli_runs_a_real_log_piece(tmp_path):
     assert (tmp_path / "map.png").stat().st_size > 1000
     # scored against the log's own (odometry) poses: the robot barely moves in these 200 scans
     assert metrics["ate_m"] < 0.5
+    # played back at its pace (Intel's scans ~0.2 s apart) the run ends no later than its
+    # slowest scan: every lag is at least that scan's own time, and at most the whole run's
+    assert 0.0 < metrics["lag_p95_s"] <= metrics["lag_max_s"] <= metrics["wall_time_s"]
+
+
+def test_replay_lag_queues_scans_behind_slow_ones():
+    from usvdrake.systems.slam.offline import replay_lag
+
+    # arrivals 0, 1, 2, 2, 3 (the fourth, stamped back in time, counts as arriving at 2); a
+    # 2.5 s step on the second delays all after it: they end at 0.5, 3.5, 4.0, 4.5, 5.0
+    lag = replay_lag([0.0, 1.0, 2.0, 1.5, 3.0], [0.5, 2.5, 0.5, 0.5, 0.5])
+    np.testing.assert_allclose(lag, [0.5, 2.5, 2.0, 2.5, 2.0])
+    with pytest.raises(ValueError, match="2 stamps but 3"):
+        replay_lag([0.0, 1.0], [0.1, 0.1, 0.1])
 
 
 def test_slam2d_scores_a_raw_log_against_its_corrected_log_scan_by_scan(tmp_path):

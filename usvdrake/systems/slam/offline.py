@@ -155,11 +155,14 @@ def run_graph_slam(
 
         iterator = tqdm(scans, unit="scan")
     now = last_full = -np.inf
+    steps = slam.stats.setdefault("offline_step_ms", [])
     for rec in iterator:
+        t0 = time.perf_counter()
         slam.process_scan(replace(rec.scan, time=rec.timestamp))
         now = max(now, rec.timestamp)  # (corrected CARMEN logs' stamps may step back)
         if now - last_full >= full_period and slam.optimise_pending():
             last_full = now
+        steps.append((time.perf_counter() - t0) * 1e3)
         stamps.append(rec.timestamp)
         anchors.append((max(len(slam.nodes) - 1, 0), slam._rel.copy()))
     slam.optimise_pending()
@@ -167,6 +170,24 @@ def run_graph_slam(
         [compose(slam.nodes[i].pose, rel) if slam.nodes else rel for i, rel in anchors]
     )
     return np.asarray(stamps), poses, slam
+
+
+def replay_lag(stamps, step_s) -> np.ndarray:
+    """[s] how far behind each scan's arrival its processing ends when a log is played back at
+    its own pace: scan i arrives at ``stamps[i]`` (made non-decreasing), waits for the scans
+    before it and takes ``step_s[i]``, so it ends at e_i = max(stamps[i], e_{i−1}) + step_s[i]
+    and lags e_i − stamps[i]. A run keeps up when the lags stay bounded (a full optimisation
+    can be caught up on while the sensor is quiet); a real-time factor above 1 alone can hide
+    a backlog that only clears at the log's end."""
+    t = np.maximum.accumulate(np.asarray(stamps, float))
+    cost = np.asarray(step_s, float)
+    if t.shape != cost.shape:
+        raise ValueError(f"replay_lag: {len(t)} stamps but {len(cost)} step times")
+    end, lag = -np.inf, np.empty(len(t))
+    for i, (ti, ci) in enumerate(zip(t, cost, strict=True)):
+        end = max(ti, end) + ci
+        lag[i] = end - ti
+    return lag
 
 
 def run_slam2d(
@@ -257,6 +278,10 @@ def run_slam2d(
         # None: the log's stamps do not measure time (no duration to keep up with)
         "realtime_factor": duration / wall if wall > 0 and _stamps_advance(scans) else None,
     }
+    if _stamps_advance(scans):  # played back at the log's pace: how far behind it falls
+        lag = replay_lag(stamps, np.asarray(slam.stats["offline_step_ms"]) / 1e3)
+        metrics["lag_max_s"] = float(lag.max())
+        metrics["lag_p95_s"] = float(np.percentile(lag, 95))
     if reference is not None:
         t_est, p_est, t_ref, p_ref, how = _reference_pairs(clean, stamps, poses, reference)
         result = ate(
