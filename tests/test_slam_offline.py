@@ -32,8 +32,8 @@ def test_slam2d_cli_runs_a_real_log_piece(tmp_path):
     assert (tmp_path / "map.png").stat().st_size > 1000
     # scored against the log's own (odometry) poses: the robot barely moves in these 200 scans
     assert metrics["ate_m"] < 0.5
-    # played back at its pace (Intel's scans ~0.2 s apart) the run ends no later than its
-    # slowest scan: every lag is at least that scan's own time, and at most the whole run's
+    # played back at its pace (Intel's scans ~0.2 s apart) every scan's lag is at least its
+    # own processing time (> 0) and at most the whole run's wall time
     assert 0.0 < metrics["lag_p95_s"] <= metrics["lag_max_s"] <= metrics["wall_time_s"]
 
 

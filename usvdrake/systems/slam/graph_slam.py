@@ -535,7 +535,8 @@ class GraphSlam:
         return self.pose
 
     def pose_covariance(self) -> np.ndarray:
-        """The Censi covariance of the latest node's consecutive constraint."""
+        """The covariance of the latest node's consecutive constraint (Censi's, or the
+        tracking field's spread with ``landscape_temperature``)."""
         for c in reversed(self.constraints):
             if c.kind == "consecutive":
                 return c.cov
