@@ -384,7 +384,7 @@ class GraphSlam:
         node = Node(pose, points, ranges, angles, t, tree=cKDTree(points))
         node.first_constraint = len(self.constraints)
         self.nodes.append(node)
-        self._sync_xy([len(self.nodes) - 1])
+        self._sync_xy()
         self._render(node)
         return node
 
@@ -415,14 +415,13 @@ class GraphSlam:
             self.full_pending = True  # the whole graph, at the caller's pace (optimise_pending)
 
     def _sync_xy(self, changed=()) -> None:
-        """Bring the node positions' array up to date after the nodes ``changed`` got a new
-        pose (all of them if nodes were added behind its back): the loop candidates' search
-        reads it instead of gathering every node's pose per new node."""
-        if len(self._xy) == len(self.nodes) - 1 and list(changed) == [len(self.nodes) - 1]:
-            self._xy = np.vstack([self._xy, self.nodes[-1].pose[:2]])
-        elif len(self._xy) != len(self.nodes):
-            self._xy = np.array([n.pose[:2] for n in self.nodes]).reshape(-1, 2)
-        elif len(changed):
+        """Bring the node positions' array up to date: rows for the nodes added since (by
+        ``_add_node`` or behind its back), and the nodes ``changed`` that got a new pose. The
+        loop candidates' search reads it instead of gathering every node's pose per new node."""
+        n = len(self._xy)
+        if n < len(self.nodes):
+            self._xy = np.vstack([self._xy, [node.pose[:2] for node in self.nodes[n:]]])
+        if len(changed):
             self._xy[list(changed)] = [self.nodes[k].pose[:2] for k in changed]
 
     def _loop_candidates(self, k: int) -> list[int]:

@@ -260,6 +260,7 @@ def run_slam2d(
     _write_map_png(out / "map.png", grid)
     track = np.asarray(slam.stats["tracking_ms"])
     duration = float(stamps.max() - stamps.min()) if len(stamps) > 1 else 0.0
+    timed = _stamps_advance(scans)
     metrics = {
         "log": str(log),
         "scans": len(scans),
@@ -276,9 +277,9 @@ def run_slam2d(
         "wall_time_s": wall,
         "log_duration_s": duration,
         # None: the log's stamps do not measure time (no duration to keep up with)
-        "realtime_factor": duration / wall if wall > 0 and _stamps_advance(scans) else None,
+        "realtime_factor": duration / wall if wall > 0 and timed else None,
     }
-    if _stamps_advance(scans):  # played back at the log's pace: how far behind it falls
+    if timed:  # played back at the log's pace: how far behind it falls
         lag = replay_lag(stamps, np.asarray(slam.stats["offline_step_ms"]) / 1e3)
         metrics["lag_max_s"] = float(lag.max())
         metrics["lag_p95_s"] = float(np.percentile(lag, 95))
