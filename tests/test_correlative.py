@@ -101,6 +101,64 @@ def test_runner_up_exposes_a_repeating_corridor_but_not_a_room():
     assert np.hypot(clear.pose[0] - 0.3, clear.pose[1] - 0.2) <= 0.1
 
 
+def test_a_rival_floor_gives_the_exact_searchs_answer_to_is_there_a_rival():
+    """``rival_above``: above the fraction the runner-up is the exact one (score and pose), below
+    it none is reported; the best match is the same either way."""
+    ref = corridor(0.0)
+    field = LikelihoodField.build(ref, 0.05, 0.1, margin=2.5)
+    scene = cluttered_room()
+    room = LikelihoodField.build(points(scene, (0.0, 0.0, 0.0)), 0.05, 0.1, margin=2.5)
+    cases = [(field, corridor(0.3)[::3], 0.2), (room, points(scene, (0.3, 0.2, 0.1)), 0.3)]
+    for f, cur, angle in cases:
+        exact = correlative_match(f, cur, (0.0, 0.0, 0.0), 1.5, angle, distinct=0.5)
+        ratio = exact.runner_up / exact.score
+        for above in (0.5 * ratio, 0.999 * ratio, min(1.001 * ratio, 1.0), 1.0):
+            m = correlative_match(
+                f, cur, (0.0, 0.0, 0.0), 1.5, angle, distinct=0.5, rival_above=above
+            )
+            assert np.array_equal(m.pose, exact.pose) and m.score == exact.score
+            if above < ratio:
+                assert m.runner_up == exact.runner_up
+                assert np.array_equal(m.runner_up_pose, exact.runner_up_pose)
+            else:
+                assert m.runner_up == 0.0 and m.runner_up_pose is None
+            # so "is a rival above the fraction?" is answered as by the exact search
+            assert (m.runner_up > above * m.score) == (exact.runner_up > above * exact.score)
+    with pytest.raises(ValueError, match="rival_above"):
+        correlative_match(room, cases[1][1], distinct=0.5, rival_above=1.5)
+    with pytest.raises(ValueError, match="lateral prior"):
+        correlative_match(
+            room,
+            cases[1][1],
+            distinct=0.5,
+            rival_above=0.7,
+            prior_from=(0, 0, 0),
+            lateral_weight=1.0,
+        )
+
+
+def test_three_level_search_equals_the_exhaustive_one_past_the_fields_edges():
+    """A window wider than the field's margin puts points off the table on every side: the top
+    and coarse bounds of blocks that start off it but reach into it must still bound them (the
+    table's first cells do), so the search returns the exhaustive grid's best."""
+    scene = cluttered_room()
+    ref, cur = points(scene, (0.0, 0.0, 0.0)), points(scene, (0.62, -0.47, np.deg2rad(4.0)))
+    sub = cur[:: -(-len(cur) // 60)]
+    step = np.deg2rad(2.0)
+    for margin, guess in ((0.1, (0.0, 0.0, 0.0)), (0.1, (-0.9, 0.8, 0.0)), (1.5, (0.3, 0.0, 0.0))):
+        field = LikelihoodField.build(ref, 0.05, 0.1, margin=margin)
+        match = correlative_match(field, sub, guess, 1.0, np.deg2rad(6.0), step, 60)
+        grid = [
+            (field.score(sub, (guess[0] + x, guess[1] + y, th)), (guess[0] + x, guess[1] + y, th))
+            for th in step * np.arange(-3, 4)
+            for x in 0.05 * np.arange(-20, 21)
+            for y in 0.05 * np.arange(-20, 21)
+        ]
+        best = max(c[0] for c in grid)
+        assert match.score == pytest.approx(best, abs=1e-12)
+        assert field.score(sub, match.pose) == pytest.approx(best, abs=1e-12)
+
+
 def test_lateral_motion_is_zero_along_any_arc_and_the_offset_when_sliding():
     assert lateral_motion((0.0, 0.0, 0.0), (1.0, 0.0, 0.0)) == 0.0  # driving straight
     assert lateral_motion((2.0, 1.0, 0.3), (2.0, 1.0, 0.8)) == 0.0  # turning on the spot

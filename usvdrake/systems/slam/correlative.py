@@ -9,13 +9,16 @@ points scores the mean field value under them (Olson's eq. 4 with the lookup tab
 §III-B; 1 on the surfaces, 0 far away), so the best pose of a search window is the maximum of a
 3D grid of candidates.
 
-That grid is searched exactly by Olson's two-level method (§IV-B): a coarse table whose cell
-holds the maximum of the fine cells it covers bounds the score of every fine translation inside
-a coarse one. All coarse candidates are scored (a numba kernel over rotations × translations ×
-points, rotations on parallel threads), and the fine translations are evaluated coarse cell by
-coarse cell in decreasing bound order until the bound falls below the best fine score found:
-the result equals the exhaustive fine search, at the cost of the coarse one and a few fine
-cells. The fine answer is as accurate as the grid (``resolution`` in translation,
+That grid is searched exactly by branch and bound over bounds tables (Olson §IV-B; a third
+level as in Hess et al. 2016): a coarse table whose cell holds the maximum of the k × k fine
+cells it starts, and a top one holding that of (k·m)² cells, bound the score of every fine
+translation inside a block. Every rotation × top block is scored (a numba kernel, rotations on
+parallel threads), then blocks are opened best bound first, a top block into its coarse ones,
+a coarse one into its fine translations, while their bound can still reach the best score
+found: the result equals the exhaustive fine search (ties broken as the two-level search
+before it broke them), at the cost of the top level and a few blocks. On Intel's raw log
+the tracking searches (±92°) took 2.8 ms instead of 12.5 ms with the two-level one (median of
+120). The fine answer is as accurate as the grid (``resolution`` in translation,
 ``angular_step`` in rotation); PLICP refines it.
 """
 
@@ -41,29 +44,35 @@ def distance_field(points: np.ndarray, resolution: float, margin: float):
     return distance_transform_edt(empty) * resolution, lo
 
 
-def _window_max(field: np.ndarray, k: int) -> np.ndarray:
-    """out[r, c] = max of field[r : r + k, c : c + k] (cells beyond the edge count as 0)."""
+def _window_max(field: np.ndarray, n: int, step: int = 1) -> np.ndarray:
+    """out[r, c] = max of field[r + a·step, c + b·step] over a, b < ``n`` (cells beyond the
+    edge count as 0): with step 1 the max over the n × n block starting at (r, c); applied to
+    such a block max of side ``step``, the max over the (n·step)² block."""
     out = field.copy()
     for axis in (0, 1):
         src = out.copy()
-        for m in range(1, k):
+        for m in range(1, n):
+            d = m * step
             if axis == 0:
-                np.maximum(out[:-m], src[m:], out=out[:-m])
+                np.maximum(out[:-d], src[d:], out=out[:-d])
             else:
-                np.maximum(out[:, :-m], src[:, m:], out=out[:, :-m])
+                np.maximum(out[:, :-d], src[:, d:], out=out[:, :-d])
     return out
 
 
 @dataclass
 class LikelihoodField:
-    """Olson's lookup table of a reference point set: ``fine`` (cell ``resolution`` [m]) and
-    ``coarse`` = the max over each ``k`` × ``k`` block of fine cells starting at that cell."""
+    """Olson's lookup table of a reference point set: ``fine`` (cell ``resolution`` [m]),
+    ``coarse`` = the max over each ``k`` × ``k`` block of fine cells starting at that cell and
+    ``top`` = the max over each (k·m) × (k·m) block: the bounds of a three-level search."""
 
     fine: np.ndarray
     coarse: np.ndarray
     origin: np.ndarray  # [m] corner of cell (0, 0)
     resolution: float
     k: int
+    top: np.ndarray
+    m: int
 
     @classmethod
     def build(
@@ -73,15 +82,20 @@ class LikelihoodField:
         sigma: float = 0.1,
         margin: float = 2.0,
         k: int = 4,
+        m: int = 4,
     ) -> "LikelihoodField":
         """The field of ``reference`` (N × 2 points [m]), σ [m] the width of each point's
         bump (about the sensor noise plus the grid's quantisation), ``margin`` [m] of
-        empty space kept around the points, ``k`` fine cells per coarse cell side."""
+        empty space kept around the points, ``k`` fine cells per coarse cell side, ``m``
+        coarse cells per top cell side."""
         if len(reference) == 0:
             raise ValueError("LikelihoodField: no reference points")
+        if k < 1 or m < 1:
+            raise ValueError(f"LikelihoodField: k and m must be ≥ 1, got {k} and {m}")
         d, lo = distance_field(np.asarray(reference, float), resolution, margin)
         fine = np.exp(-0.5 * (d / sigma) ** 2)
-        return cls(fine, _window_max(fine, k), lo, resolution, k)
+        coarse = _window_max(fine, k)
+        return cls(fine, coarse, lo, resolution, k, _window_max(coarse, m, k), m)
 
     def score(self, points: np.ndarray, pose) -> float:
         """Mean field value [0, 1] under ``points`` (sensor frame) placed at ``pose`` (x, y, θ)."""
@@ -120,114 +134,188 @@ class CorrelativeMatch(NamedTuple):
 
 
 @njit(cache=True, parallel=True)
-def _score_grid(table, cell0x, cell0y, px, py, thetas, nx, ny, stride):
-    """scores[θ, i, j] = Σ_points table[cell of (R(θ) p) + cell0 + (i, j)·stride] for points
-    given in cells (px, py: coordinates [cells] relative to the table's origin). Rotations
-    run in parallel (numba threads; each writes its own slice, so the result does not depend
-    on the thread count): on 2 cores a ±92° tracking search on Freiburg 079 scans took 16 ms
-    instead of 40 ms serially."""
-    rows, cols = table.shape
-    out = np.zeros((len(thetas), nx, ny))
+def _base_cells(cell0x, cell0y, px, py, thetas):
+    """(bx, by)[θ, p] = floor(R(θ) p + cell0): the cell of point p (px, py: coordinates
+    [cells] relative to a table's origin) rotated by θ and moved by cell0. A translation of
+    the search window shifts it by whole cells, so a search computes it once per rotation and
+    point, not once per candidate."""
+    bx = np.empty((len(thetas), len(px)), np.int64)
+    by = np.empty((len(thetas), len(px)), np.int64)
     for a in prange(len(thetas)):
         c, s = np.cos(thetas[a]), np.sin(thetas[a])
         for p in range(len(px)):
-            bx = int(np.floor(c * px[p] - s * py[p] + cell0x))
-            by = int(np.floor(s * px[p] + c * py[p] + cell0y))
+            bx[a, p] = int(np.floor(c * px[p] - s * py[p] + cell0x))
+            by[a, p] = int(np.floor(s * px[p] + c * py[p] + cell0y))
+    return bx, by
+
+
+@njit(cache=True, inline="always")
+def _bound_cell(g, n, reach):
+    """A bound table's index for cell g of a table n cells long whose entries cover ``reach``
+    cells onwards: g itself, 0 for a block that starts before the table but reaches into it
+    (its max is that of the table's first cells, which entry 0 bounds), −1 off the table."""
+    if g >= n or g <= -reach:
+        return -1
+    return max(g, 0)
+
+
+@njit(cache=True, parallel=True)
+def _sum_cells(table, bx, by, nx, ny, stride, reach):
+    """scores[θ, i, j] = Σ_p table[by[θ, p] + j·stride, bx[θ, p] + i·stride], the cells
+    through :func:`_bound_cell` (``reach`` 1: a plain table, off it counts 0). Rotations run in
+    parallel (numba threads; each writes its own slice, so the result does not depend on the
+    thread count): on 2 cores a ±92° tracking search on Freiburg 079 scans took 16 ms instead
+    of 40 ms serially."""
+    rows, cols = table.shape
+    out = np.zeros((bx.shape[0], nx, ny))
+    for a in prange(bx.shape[0]):
+        for p in range(bx.shape[1]):
             for i in range(nx):
-                gx = bx + i * stride
-                if gx < 0 or gx >= cols:
+                gx = _bound_cell(bx[a, p] + i * stride, cols, reach)
+                if gx < 0:
                     continue
                 for j in range(ny):
-                    gy = by + j * stride
-                    if gy >= 0 and gy < rows:
+                    gy = _bound_cell(by[a, p] + j * stride, rows, reach)
+                    if gy >= 0:
                         out[a, i, j] += table[gy, gx]
     return out
 
 
-@njit(cache=True)
-def _least_lateral_sq(ns, nc, lx, ly, res, k, nfx, ncx):
-    """out[a, ci, cj] = least (ns[a] x + nc[a] y)² over the coarse cell's translations x ∈ lx +
-    [ci·k, min(ci·k + k − 1, nfx − 1)]·res (y likewise): the sideways offset is linear in
-    them, so its extremes lie on the cell's corners (0 when they straddle 0)."""
-    out = np.zeros((len(ns), ncx, ncx))
-    for a in range(len(ns)):
-        for ci in range(ncx):
-            x0 = lx + ci * k * res
-            x1 = lx + min(ci * k + k - 1, nfx - 1) * res
-            for cj in range(ncx):
-                y0 = ly + cj * k * res
-                y1 = ly + min(cj * k + k - 1, nfx - 1) * res
-                c00 = ns[a] * x0 + nc[a] * y0
-                c01 = ns[a] * x0 + nc[a] * y1
-                c10 = ns[a] * x1 + nc[a] * y0
-                c11 = ns[a] * x1 + nc[a] * y1
-                lo = min(min(c00, c01), min(c10, c11))
-                hi = max(max(c00, c01), max(c10, c11))
-                if lo > 0.0:
-                    out[a, ci, cj] = lo * lo
-                elif hi < 0.0:
-                    out[a, ci, cj] = hi * hi
-    return out
+def _score_grid(table, cell0x, cell0y, px, py, thetas, nx, ny, stride):
+    """scores[θ, i, j] = Σ_points table[cell of (R(θ) p) + cell0 + (i, j)·stride] for points
+    given in cells (px, py: coordinates [cells] relative to the table's origin)."""
+    return _sum_cells(table, *_base_cells(cell0x, cell0y, px, py, thetas), nx, ny, stride, 1)
+
+
+@njit(cache=True, inline="always")
+def _least_sq(ns, nc, x0, x1, y0, y1):
+    """Least (ns x + nc y)² over the rectangle [x0, x1] × [y0, y1]: the sideways offset is
+    linear in (x, y), so its extremes lie on the corners (0 when they straddle 0)."""
+    c00 = ns * x0 + nc * y0
+    c01 = ns * x0 + nc * y1
+    c10 = ns * x1 + nc * y0
+    c11 = ns * x1 + nc * y1
+    lo = min(min(c00, c01), min(c10, c11))
+    hi = max(max(c00, c01), max(c10, c11))
+    if lo > 0.0:
+        return lo * lo
+    if hi < 0.0:
+        return hi * hi
+    return 0.0
+
+
+@njit(cache=True, inline="always")
+def _block_penalty(lat, a, i0, j0, size, nf):
+    """The least lateral penalty weight · (ns[a] x + nc[a] y)² over the fine translations
+    (i, j) ∈ [i0, i0 + size) × [j0, j0 + size) (clipped to the nf × nf window) of rotation a:
+    what a block's bound loses (``lat`` as in :func:`_branch_and_bound`)."""
+    w, lx, ly, res = lat[0][0], lat[0][1], lat[0][2], lat[0][3]
+    return w * _least_sq(
+        lat[1][a],
+        lat[2][a],
+        lx + i0 * res,
+        lx + min(i0 + size - 1, nf - 1) * res,
+        ly + j0 * res,
+        ly + min(j0 + size - 1, nf - 1) * res,
+    )
 
 
 @njit(cache=True)
-def _refine(
-    fine,
-    cell0x,
-    cell0y,
-    px,
-    py,
-    thetas,
-    lat,
-    order,
-    ci,
-    cj,
-    ca,
-    bounds,
-    k,
-    nfx,
-    nfy,
-    ex_i,
-    ex_j,
-    ex_r,
-):
-    """Branch and bound over the coarse cells in ``order`` (decreasing bound): the best fine
-    (θ index, i, j) and its score; stops once a bound cannot beat the best. Translations within
-    ``ex_r`` cells of (ex_i, ex_j) are excluded (ex_r < 0: none). ``lat`` = ([weight, lx, ly,
-    res], ns, nc), ns and nc per rotation: a fine cell's score loses weight · (ns[a] (lx +
-    i·res) + nc[a] (ly + j·res))², the arc prior of :func:`lateral_motion` (weight 0: none)."""
+def _branch_and_bound(fine, coarse, top, bx, by, k, m, nf, lat, ex_i, ex_j, ex_r, floor):
+    """(score, θ index, i, j, found): the best fine candidate of a window of nf × nf
+    translations whose score exceeds ``floor`` (found False, and (0, 0, 0), if none does),
+    searched best-first over three levels of bounds (Olson 2009 §IV-B, with a third
+    level as in Hess et al. 2016's branch and bound): top cells of (k·m)² translations scored
+    on ``top`` for every rotation (each a sum over the points, bx/by their base cells of
+    :func:`_base_cells`), their k × k blocks on ``coarse`` when the top bound can still reach
+    the best score, the fine candidates of a block on ``fine`` likewise.
+
+    Ties go where the two-level search over coarse cells in decreasing bound order put them
+    (the same answer, to the bit, as that search and as the exhaustive one): among the fine
+    candidates of the best score, the one of the largest coarse bound, then the lowest
+    (θ, coarse i, coarse j) index, then the lowest (i, j) within. Translations within ``ex_r``
+    cells of (ex_i, ex_j) are excluded (ex_r < 0: none). ``lat`` = ([weight, lx, ly, res],
+    ns, nc), ns and nc per rotation: a fine cell's score loses weight · (ns[a] (lx + i·res) +
+    nc[a] (ly + j·res))², the arc prior of :func:`lateral_motion`, each bound its least value
+    over the cell (weight 0: none)."""
     rows, cols = fine.shape
-    w, lx, ly, ns, nc, res = lat[0][0], lat[0][1], lat[0][2], lat[1], lat[2], lat[0][3]
-    best, bi, bj, ba = -1.0, 0, 0, 0
+    w, lx, ly, res = lat[0][0], lat[0][1], lat[0][2], lat[0][3]
+    ns, nc = lat[1], lat[2]
+    big = k * m
+    nc1 = -(-nf // k)  # coarse cells per side
+    n_top = -(-nc1 // m)  # top cells per side
+    n_a, n_p = bx.shape
+    # top level: every rotation × top cell (the points' loop inside, for each cell, is the
+    # work that a coarse-only search spends on all (k·m / k)² = m² times as many cells)
+    tb = _sum_cells(top, bx, by, n_top, n_top, big, big)
+    if w > 0.0:
+        for a in range(n_a):
+            for ti in range(n_top):
+                for tj in range(n_top):
+                    tb[a, ti, tj] -= _block_penalty(lat, a, ti * big, tj * big, big, nf)
+    flat = tb.ravel()
+    order = np.argsort(-flat)
+    best, ba, bi, bj = floor, 0, 0, 0
+    # the winner's (−coarse bound, coarse index, fine index); −∞ until one beats the floor
+    key_b, key_o, key_f = -np.inf, 0, 0
+    b1 = np.empty(m * m)
+    o1 = np.empty(m * m, np.int64)
     for n in range(len(order)):
-        o = order[n]
-        if bounds[o] <= best:
+        t = order[n]
+        if flat[t] < best:
             break
-        a = ca[o]
-        c, s = np.cos(thetas[a]), np.sin(thetas[a])
-        i0, j0 = ci[o] * k, cj[o] * k
-        for di in range(k):
-            i = i0 + di
-            if i >= nfx:
-                break
-            for dj in range(k):
-                j = j0 + dj
-                if j >= nfy:
-                    break
-                if (i - ex_i) ** 2 + (j - ex_j) ** 2 <= ex_r * ex_r:
-                    continue
+        a = t // (n_top * n_top)
+        ti, tj = (t // n_top) % n_top, t % n_top
+        # the coarse bounds of its blocks, summed in the points' order as a coarse-only
+        # search sums them (so equal to its bounds to the bit)
+        n_b = 0
+        for ci in range(ti * m, min(ti * m + m, nc1)):
+            for cj in range(tj * m, min(tj * m + m, nc1)):
                 total = 0.0
-                for p in range(len(px)):
-                    gx = int(np.floor(c * px[p] - s * py[p] + cell0x)) + i
-                    gy = int(np.floor(s * px[p] + c * py[p] + cell0y)) + j
-                    if gx >= 0 and gx < cols and gy >= 0 and gy < rows:
-                        total += fine[gy, gx]
+                for p in range(n_p):
+                    gx = _bound_cell(bx[a, p] + ci * k, cols, k)
+                    if gx < 0:
+                        continue
+                    gy = _bound_cell(by[a, p] + cj * k, rows, k)
+                    if gy >= 0:
+                        total += coarse[gy, gx]
                 if w > 0.0:
-                    d = ns[a] * (lx + i * res) + nc[a] * (ly + j * res)
-                    total -= w * d * d
-                if total > best:
-                    best, bi, bj, ba = total, i, j, a
-    return best, ba, bi, bj
+                    total -= _block_penalty(lat, a, ci * k, cj * k, k, nf)
+                b1[n_b] = total
+                o1[n_b] = (a * nc1 + ci) * nc1 + cj
+                n_b += 1
+        blocks = np.argsort(-b1[:n_b])
+        for q in range(n_b):
+            bound, o = b1[blocks[q]], o1[blocks[q]]
+            if bound < best:
+                break
+            if bound == best and (-bound, o) > (key_b, key_o):
+                continue
+            ci, cj = (o // nc1) % nc1, o % nc1
+            for di in range(k):
+                i = ci * k + di
+                if i >= nf:
+                    break
+                for dj in range(k):
+                    j = cj * k + dj
+                    if j >= nf:
+                        break
+                    if (i - ex_i) ** 2 + (j - ex_j) ** 2 <= ex_r * ex_r:
+                        continue
+                    total = 0.0
+                    for p in range(n_p):
+                        gx = bx[a, p] + i
+                        gy = by[a, p] + j
+                        if gx >= 0 and gx < cols and gy >= 0 and gy < rows:
+                            total += fine[gy, gx]
+                    if w > 0.0:
+                        d = ns[a] * (lx + i * res) + nc[a] * (ly + j * res)
+                        total -= w * d * d
+                    f = di * k + dj
+                    if total > best or (total == best and (-bound, o, f) < (key_b, key_o, key_f)):
+                        best, ba, bi, bj = total, a, i, j
+                        key_b, key_o, key_f = -bound, o, f
+    return best, ba, bi, bj, key_b > -np.inf
 
 
 def correlative_match(
@@ -241,6 +329,7 @@ def correlative_match(
     distinct: float = 0.0,
     prior_from=None,
     lateral_weight: float = 0.0,
+    rival_above: float = 0.0,
 ) -> CorrelativeMatch:
     """The best pose (x, y, θ) of ``current`` (M × 2 points [m], sensor frame) in ``field``'s
     frame among translations within ± ``linear_window`` [m] of ``guess`` on the field's grid
@@ -258,6 +347,11 @@ def correlative_match(
     translations at least that far from the best pose (any rotation), the same branch
     and bound with that disc excluded. A runner-up close to the score means the scene repeats
     (a corridor, a row of doors) and the best pose is not to be trusted as a loop closure.
+    With ``rival_above`` ∈ (0, 1] the runner-up is looked for only among scores above that
+    fraction of the best one (none there: ``runner_up`` 0, its pose None): the branch and
+    bound then drops every cell bounded below it, and a caller that only asks "is there a
+    rival within that fraction?" gets the exact search's answer sooner (240 of Intel's loop
+    searches at 0.7: 2.15 s instead of 3.31 s).
 
     With ``prior_from`` (the pose (x, y, θ) the sensor had at the previous scan, in the field's
     frame) and ``lateral_weight`` > 0, a candidate's score is lowered by lateral_weight ·
@@ -265,6 +359,12 @@ def correlative_match(
     the search stays exact): of two poses a corridor fits alike, the one reached without
     sliding sideways wins. The returned ``score`` is the likelihood alone."""
     pts = _evenly(current, max_points, "correlative_match")
+    if not 0.0 <= rival_above <= 1.0:
+        raise ValueError(f"correlative_match: rival_above must be in [0, 1], got {rival_above}")
+    if rival_above > 0 and prior_from is not None and lateral_weight > 0:
+        # the search's floor would be on the prior-weighted score, the question on the
+        # likelihood alone: the two disagree
+        raise ValueError("correlative_match: rival_above with a lateral prior is not supported")
     res, k = field.resolution, field.k
     if angular_step is None:
         reach = float(np.max(np.hypot(pts[:, 0], pts[:, 1])))
@@ -272,13 +372,12 @@ def correlative_match(
     n_a = int(np.floor(angular_window / angular_step))
     thetas = guess[2] + angular_step * np.arange(-n_a, n_a + 1)
     n_f = int(np.floor(linear_window / res))
-    nfx = nfy = 2 * n_f + 1
+    nfx = 2 * n_f + 1  # fine translations per side
     # candidate (i, j) translates by guess − window + (i, j)·res; points in cells from the origin
     x0 = guess[0] - n_f * res - field.origin[0]
     y0 = guess[1] - n_f * res - field.origin[1]
     px, py = pts[:, 0] / res, pts[:, 1] / res
-    ncx = -(-nfx // k)
-    bounds = _score_grid(field.coarse, x0 / res, y0 / res, px, py, thetas, ncx, ncx, k)
+    bx, by = _base_cells(x0 / res, y0 / res, px, py, thetas)
     weight = lateral_weight * len(pts) if prior_from is not None else 0.0
     # (x, y) of fine cell (i, j) relative to the previous pose: (lx + i·res, ly + j·res)
     prev = np.zeros(3) if prior_from is None else np.asarray(prior_from, float)
@@ -286,36 +385,29 @@ def correlative_match(
     phi = 0.5 * (prev[2] + thetas)  # mean heading of the step, per rotation
     ns, nc = -np.sin(phi), np.cos(phi)  # the sideways offset is ns·x + nc·y
     lat = (np.array([weight, lx, ly, res]), ns, nc)
-    if weight > 0:  # each coarse bound less the least penalty over its cell's translations
-        bounds = bounds - weight * _least_lateral_sq(ns, nc, lx, ly, res, k, nfx, ncx)
-    flat = bounds.ravel()
-    ca, ci, cj = np.unravel_index(np.arange(flat.size), bounds.shape)
-    common = (field.fine, x0 / res, y0 / res, px, py, thetas, lat)
-    rest = (ci, cj, ca, flat, k, nfx, nfy)
-    top = np.array([np.argmax(flat)])
+    tables = (field.fine, field.coarse, field.top, bx, by, k, field.m, nfx, lat)
 
-    def search(*exclude):
-        # the fine score found inside the best-bounded coarse cell is reached, so no coarse
-        # cell bounded below it can hold the answer: only the others are sorted (a full sort
-        # of every rotation × coarse cell took a fifth of a tracking search), in the order a
-        # stable sort of all of them gives them, so the result is the exhaustive one
-        reached = _refine(*common, top, *rest, *exclude)[0]
-        keep = np.flatnonzero(flat >= reached)
-        return _refine(*common, keep[np.argsort(-flat[keep], kind="stable")], *rest, *exclude)
+    def search(ex_i: int, ex_j: int, ex_r: float, floor: float = -1.0):
+        return _branch_and_bound(*tables, ex_i, ex_j, ex_r, floor)
 
     def pose_of(a: int, i: int, j: int) -> np.ndarray:
         return np.array([x0 + i * res + field.origin[0], y0 + j * res + field.origin[1], thetas[a]])
 
-    best, a, i, j = search(0, 0, -1.0)
+    best, a, i, j, _ = search(0, 0, -1.0)
     if weight > 0:  # the likelihood alone
         best += weight * lateral_motion(prev, pose_of(a, i, j)) ** 2
     runner_up, runner_up_pose = np.nan, None
     if distinct > 0:
-        second, *cell = search(i, j, distinct / res)
-        runner_up_pose = pose_of(*cell)
-        if weight > 0:
-            second += weight * lateral_motion(prev, runner_up_pose) ** 2
-        runner_up = max(second, 0.0) / len(pts)
+        # (a hair below the fraction: a rival exactly at it is found, its score exact)
+        floor = rival_above * best * (1.0 - 1e-9) if rival_above > 0 else -1.0
+        second, *cell, found = search(i, j, distinct / res, floor)
+        if found or rival_above == 0:
+            runner_up_pose = pose_of(*cell)
+            if weight > 0:
+                second += weight * lateral_motion(prev, runner_up_pose) ** 2
+            runner_up = max(second, 0.0) / len(pts)
+        else:
+            runner_up = 0.0
     return CorrelativeMatch(
         pose_of(a, i, j), float(best / len(pts)), float(runner_up), runner_up_pose
     )

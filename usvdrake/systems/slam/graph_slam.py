@@ -471,6 +471,8 @@ class GraphSlam:
                 self.cfg.loop_linear_window,
                 self.cfg.loop_angular_window,
                 distinct=self.cfg.loop_distinct,
+                # only whether a rival comes that close matters, not its exact score
+                rival_above=min(max(self.cfg.max_loop_ambiguity, 0.0), 1.0),
             )
             guess = match.pose
             # a weak fit, or one the scene repeats (a corridor): not a loop
