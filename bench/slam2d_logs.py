@@ -5,10 +5,12 @@ Runs ``usvdrake slam2d``'s offline runner (:func:`usvdrake.systems.slam.offline.
 ``--data`` (default ``../shared/data/carmen/corrected``: Intel, MIT-CSAIL, Freiburg 079 and
 ACES, subsampled scans with SLAM-corrected poses) and scores it by ATE against the log's own
 poses after an SE(2) alignment. Prints one JSON object: per log ``ate_m`` (target ≤ 0.10),
-``realtime_factor`` (log duration / wall time; ≥ 1 keeps up, ``keeps_up``; None where the
-stamps do not measure time) and ``lag_max_s`` (played at the log's pace, the most a scan's
-processing ends behind its arrival: a bounded lag keeps up), nodes, loops accepted and
-rejected by GNC, full optimisations (at most one per 3 s of log time); and ``reached`` per log.
+``realtime_factor`` (log duration / wall time; None where the stamps do not measure time),
+``lag_max_s`` (played at the log's pace, the most a scan's processing ends behind its arrival)
+and ``keeps_up``: a factor ≥ 1 *and* a lag of at most ``MAX_LAG_S`` (a factor above 1 alone
+can hide a backlog that grows all through the log and only clears at its end), nodes, loops
+accepted and rejected by GNC, full optimisations (at most one per 3 s of log time) and the wall
+time they took; and ``reached`` per log.
 
 ``--raw``: run on the raw logs instead (``intel.clf.bz2`` … beside the ``corrected`` folder:
 every scan the robot recorded, with its own clock), the command the issue names, scored against
@@ -30,6 +32,9 @@ RAW = {  # the raw log of each corrected one
     "aces": "aces.clf.bz2",
 }
 TARGET_ATE = 0.10  # [m] issue 6
+# [s] the most a scan may end behind its arrival for a run to count as keeping up: a minute, in
+# which a robot at walking pace has gone ~60 m on a map that has not caught up with it
+MAX_LAG_S = 60.0
 
 
 def main() -> None:
@@ -66,11 +71,14 @@ def main() -> None:
                 "tracking_ms_median": m["tracking_ms_median"],
                 "wall_time_s": m["wall_time_s"],
                 "full_optimisations": m["full_optimisations"],
+                "full_optimisation_s": m["full_optimisation_s"],
                 "realtime_factor": m["realtime_factor"],
                 # [s] most a scan's processing ended behind its arrival, played at the log's pace
                 "lag_max_s": m.get("lag_max_s"),
                 # None: the log's stamps do not measure time (MIT-CSAIL's corrected log)
-                "keeps_up": None if m["realtime_factor"] is None else m["realtime_factor"] >= 1.0,
+                "keeps_up": None
+                if m["realtime_factor"] is None
+                else m["realtime_factor"] >= 1.0 and m["lag_max_s"] <= MAX_LAG_S,
             }
     print(
         json.dumps(

@@ -35,6 +35,10 @@ def test_slam2d_cli_runs_a_real_log_piece(tmp_path):
     # played back at its pace (Intel's scans ~0.2 s apart) every scan's lag is at least its
     # own processing time (> 0) and at most the whole run's wall time
     assert 0.0 < metrics["lag_p95_s"] <= metrics["lag_max_s"] <= metrics["wall_time_s"]
+    # the full optimisations' share of that wall time: each no longer than the longest
+    n_full, full_s = metrics["full_optimisations"], metrics["full_optimisation_s"]
+    assert 0.0 <= full_s <= n_full * metrics["full_optimisation_ms_max"] / 1e3 + 1e-12
+    assert full_s < metrics["wall_time_s"]
 
 
 def test_replay_lag_queues_scans_behind_slow_ones():
