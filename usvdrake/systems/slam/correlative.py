@@ -159,6 +159,21 @@ def _bound_cell(g, n, reach):
     return max(g, 0)
 
 
+@njit(cache=True, inline="always")
+def _cell_sum(table, bx, by, a, di, dj, reach):
+    """Σ_p table[by[a, p] + dj, bx[a, p] + di], the cells through :func:`_bound_cell`: one
+    candidate's score (``reach`` 1) or one block's bound (``reach`` its side), summed in the
+    points' order."""
+    rows, cols = table.shape
+    total = 0.0
+    for p in range(bx.shape[1]):
+        gx = _bound_cell(bx[a, p] + di, cols, reach)
+        gy = _bound_cell(by[a, p] + dj, rows, reach)
+        if gx >= 0 and gy >= 0:
+            total += table[gy, gx]
+    return total
+
+
 @njit(cache=True, parallel=True)
 def _sum_cells(table, bx, by, nx, ny, stride, reach):
     """scores[θ, i, j] = Σ_p table[by[θ, p] + j·stride, bx[θ, p] + i·stride], the cells
@@ -238,13 +253,12 @@ def _branch_and_bound(fine, coarse, top, bx, by, k, m, nf, lat, ex_i, ex_j, ex_r
     ns, nc), ns and nc per rotation: a fine cell's score loses weight · (ns[a] (lx + i·res) +
     nc[a] (ly + j·res))², the arc prior of :func:`lateral_motion`, each bound its least value
     over the cell (weight 0: none)."""
-    rows, cols = fine.shape
     w, lx, ly, res = lat[0][0], lat[0][1], lat[0][2], lat[0][3]
     ns, nc = lat[1], lat[2]
     big = k * m
     nc1 = -(-nf // k)  # coarse cells per side
     n_top = -(-nc1 // m)  # top cells per side
-    n_a, n_p = bx.shape
+    n_a = bx.shape[0]
     # top level: every rotation × top cell, 1/m² as many cells as a two-level search scores
     tb = _sum_cells(top, bx, by, n_top, n_top, big, big)
     if w > 0.0:
@@ -270,14 +284,7 @@ def _branch_and_bound(fine, coarse, top, bx, by, k, m, nf, lat, ex_i, ex_j, ex_r
         n_b = 0
         for ci in range(ti * m, min(ti * m + m, nc1)):
             for cj in range(tj * m, min(tj * m + m, nc1)):
-                total = 0.0
-                for p in range(n_p):
-                    gx = _bound_cell(bx[a, p] + ci * k, cols, k)
-                    if gx < 0:
-                        continue
-                    gy = _bound_cell(by[a, p] + cj * k, rows, k)
-                    if gy >= 0:
-                        total += coarse[gy, gx]
+                total = _cell_sum(coarse, bx, by, a, ci * k, cj * k, k)
                 if w > 0.0:
                     total -= _block_penalty(lat, a, ci * k, cj * k, k, nf)
                 b1[n_b] = total
@@ -301,12 +308,7 @@ def _branch_and_bound(fine, coarse, top, bx, by, k, m, nf, lat, ex_i, ex_j, ex_r
                         break
                     if (i - ex_i) ** 2 + (j - ex_j) ** 2 <= ex_r * ex_r:
                         continue
-                    total = 0.0
-                    for p in range(n_p):
-                        gx = bx[a, p] + i
-                        gy = by[a, p] + j
-                        if gx >= 0 and gx < cols and gy >= 0 and gy < rows:
-                            total += fine[gy, gx]
+                    total = _cell_sum(fine, bx, by, a, i, j, 1)
                     if w > 0.0:
                         d = ns[a] * (lx + i * res) + nc[a] * (ly + j * res)
                         total -= w * d * d
