@@ -341,18 +341,26 @@ def test_offline_full_optimisations_are_throttled_to_the_log_time(pond_records, 
     assert _pond_ate(runs[3.0][1], truth) <= 1.2 * _pond_ate(runs[0.0][1], truth) + 0.01
     with pytest.raises(ValueError, match="full_period"):
         run_graph_slam(records[:3], POND_GRID, full_period=-1.0)
+    # a budget of 1 s per node outlasts the 30 s log: the first full optimisation is merged
+    # after the last scan, with the one pending then
+    long = run_graph_slam(records, POND_GRID, full_budget_ms_per_node=1000.0)[2].stats
+    assert len(long["full_optimisation_ms"]) <= 2 < n_full and long["loops"] >= 5
+    with pytest.raises(ValueError, match="full_budget_ms_per_node"):
+        run_graph_slam(records[:3], POND_GRID, full_budget_ms_per_node=-1.0)
     # a log whose stamps do not measure time (MIT-CSAIL's corrected one) is not paced by them
     assert _stamps_advance(records)
     assert not _stamps_advance([r._replace(timestamp=7.0) for r in records])
 
 
-def test_gnc_rejects_a_false_loop_and_keeps_the_true_one():
-    """Full optimisation with ``loop_gnc``: a loop 2 m off is an outlier, the true one closes."""
+def _square_with_loops():
+    """(slam, truth): a 8 × 8 m square of 20 noisy 2 m steps back to its start, nodes at the
+    dead-reckoned poses, closed by a true loop (0 → last) and an aliased one 2 m off (4 →
+    last, the last constraint), both Gaussian, with ``loop_gnc``."""
     from usvdrake.systems.slam.graph_slam import Constraint, Node
 
     rng = np.random.default_rng(3)
     side = [np.array([2.0, 0.0, 0.0])] * 4 + [np.array([2.0, 0.0, np.pi / 2])]
-    steps = side * 4  # a 8 × 8 m square, 20 nodes, back to the start
+    steps = side * 4
     truth = [np.zeros(3)]
     for s in steps:
         truth.append(compose(truth[-1], s))
@@ -373,12 +381,123 @@ def test_gnc_rejects_a_false_loop_and_keeps_the_true_one():
     false_loop = between(truth[4], truth[last]) + [0.0, 2.0, 0.0]  # an aliased match
     slam.constraints.append(Constraint(0, last, true_loop, cov, False, "loop"))
     slam.constraints.append(Constraint(4, last, false_loop, cov, False, "loop"))
+    return slam, truth
+
+
+def test_gnc_rejects_a_false_loop_and_keeps_the_true_one():
+    """Full optimisation with ``loop_gnc``: a loop 2 m off is an outlier, the true one closes."""
+    slam, truth = _square_with_loops()
     drift = np.hypot(*(slam.nodes[-1].pose[:2] - truth[-1][:2]))
     assert drift > 0.3  # what the true loop has to undo
     slam.optimise(full=True)
     assert slam._rejected == {len(slam.constraints) - 1}  # the false loop, the last added
     err = [np.hypot(*(nd.pose[:2] - t[:2])) for nd, t in zip(slam.nodes, truth, strict=True)]
     assert max(err) < 0.25  # the false loop kept (Gaussian, no GNC) bends the square by 2 m
+
+
+def test_the_worker_process_solves_a_pose_graph_as_it_is_solved_here():
+    """The same problem, GNC over its loops or robust LM, gives the same solution to the bit in
+    the worker process as in this one; the worker answers jobs in any order they are asked."""
+    from usvdrake.systems.slam.pose_graph_solve import solve_pose_graph, worker
+
+    slam, _ = _square_with_loops()
+    gnc, _ = slam._problem(full=True)
+    slam.cfg = replace(slam.cfg, loop_gnc=False)
+    robust, _ = slam._problem(full=True)
+    assert (gnc.loop_id >= 0).sum() == 2 and not gnc.robust.any()
+    assert (robust.loop_id < 0).all() and robust.robust.sum() == 20
+    jobs = [worker().submit(problem) for problem in (gnc, robust)]
+    for problem, job in reversed(list(zip((gnc, robust), jobs, strict=True))):
+        here, there = solve_pose_graph(problem), job.result()
+        np.testing.assert_array_equal(there.keys, here.keys)
+        np.testing.assert_array_equal(there.poses, here.poses)
+        assert there.rejected == here.rejected
+        assert job.result() is there  # kept for every copy of the state that asks
+    assert jobs[0].result().rejected == {len(slam.constraints) - 1}
+
+
+def test_a_job_the_worker_fails_is_solved_here_and_a_dead_worker_replaced():
+    """A solve that raises in the worker, or a worker killed mid-job, fails the job
+    (SolveFailed), not the caller: GraphSlam solves it itself; the next job gets a new worker."""
+    from usvdrake.systems.slam.pose_graph_solve import SolveFailed, worker
+
+    slam, truth = _square_with_loops()
+    problem, _ = slam._problem(full=True)
+    broken = replace(problem, i=problem.i + 100)  # constraints on nodes the graph lacks
+    with pytest.raises(SolveFailed, match="Error|error|exception|Exception"):
+        worker().submit(broken).result()
+    first = worker()
+    assert first.alive  # a failed solve leaves it serving
+    slam.full_pending = True
+    assert slam.start_full(in_worker=True) and slam.full_running
+    first._proc.kill()
+    assert slam.finish_full() and not slam.full_running
+    assert slam._rejected == {len(slam.constraints) - 1}  # solved here all the same
+    assert (
+        max(np.hypot(*(nd.pose[:2] - t[:2])) for nd, t in zip(slam.nodes, truth, strict=True))
+        < 0.25
+    )
+    assert not first.alive and worker() is not first and worker().alive
+
+
+def test_nodes_added_while_the_full_optimisation_runs_move_with_the_last_node_it_solved():
+    """A full optimisation merged after more nodes came (the worker's latency) gives the nodes
+    it was posed with the inline solve's poses to the bit and carries the later ones rigidly
+    along with the last of them."""
+    slam, truth = _square_with_loops()
+    inline = copy.deepcopy(slam)
+    inline.optimise(full=True)
+    slam.full_pending = True
+    assert slam.start_full(in_worker=True)
+    n = len(slam.nodes)
+    extra = [np.array([1.0, 0.5, 0.2]), np.array([0.7, -0.1, -0.3])]
+    for step in extra:  # two nodes added meanwhile, behind the window's back
+        add = copy.copy(slam.nodes[-1])
+        add.pose = compose(slam.nodes[-1].pose, step)
+        add.rendered_pose = add.pose.copy()
+        slam.nodes.append(add)
+    before = [between(slam.nodes[n - 1].pose, slam.nodes[k].pose) for k in (n, n + 1)]
+    assert slam.finish_full() and not slam.finish_full()  # merged once
+    for k in range(n):
+        np.testing.assert_array_equal(slam.nodes[k].pose, inline.nodes[k].pose)
+    for k, rel in zip((n, n + 1), before, strict=True):
+        np.testing.assert_allclose(between(slam.nodes[n - 1].pose, slam.nodes[k].pose), rel,
+                                   atol=1e-12)  # fmt: skip
+    np.testing.assert_allclose(slam._xy, [nd.pose[:2] for nd in slam.nodes], atol=0)
+    assert len(slam.stats["full_wait_ms"]) == 1 == len(slam.stats["full_optimisation_ms"])
+
+
+def test_offline_runs_with_the_worker_equal_the_same_schedule_solved_here(
+    pond_records, pond_offline, monkeypatch
+):
+    """The offline runner with full optimisations in the worker (merged a full_period after
+    they start) gives the same poses and map to the bit as the same schedule solved in this
+    process: the machine's speed does not enter the result."""
+    from usvdrake.systems.slam import graph_slam
+    from usvdrake.systems.slam.offline import run_graph_slam
+    from usvdrake.systems.slam.pose_graph_solve import solved
+
+    assert POND_GRID.full_in_worker
+    stamps, poses, slam = pond_offline
+    n_full = len(slam.stats["full_optimisation_ms"])
+    assert n_full >= 2 and len(slam.stats["full_wait_ms"]) == n_full
+
+    class Here:
+        @staticmethod
+        def submit(problem):
+            return solved(problem)
+
+    monkeypatch.setattr(graph_slam, "worker", Here)
+    _, poses_here, here = run_graph_slam(pond_records[0], POND_GRID)
+    np.testing.assert_array_equal(poses_here, poses)
+    np.testing.assert_array_equal(here.map.log_odds, slam.map.log_odds)
+    assert len(here.stats["full_optimisation_ms"]) == n_full
+    # merged a period later than inline runs merge them: the same loops, not the same poses
+    _, poses_inline, inline = run_graph_slam(
+        pond_records[0], replace(POND_GRID, full_in_worker=False)
+    )
+    assert inline.stats["loops"] > 0
+    assert _pond_ate(poses, pond_records[1]) <= 1.2 * _pond_ate(poses_inline, pond_records[1])
 
 
 ROOM = cluttered_room()

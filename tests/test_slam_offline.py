@@ -35,10 +35,19 @@ def test_slam2d_cli_runs_a_real_log_piece(tmp_path):
     # played back at its pace (Intel's scans ~0.2 s apart) every scan's lag is at least its
     # own processing time (> 0) and at most the whole run's wall time
     assert 0.0 < metrics["lag_p95_s"] <= metrics["lag_max_s"] <= metrics["wall_time_s"]
-    # the full optimisations' share of that wall time: each no longer than the longest
+    # the full optimisations' time: each no longer than the longest; by default they ran in
+    # the worker process, and the scans waited for them no longer than the run took
     n_full, full_s = metrics["full_optimisations"], metrics["full_optimisation_s"]
     assert 0.0 <= full_s <= n_full * metrics["full_optimisation_ms_max"] / 1e3 + 1e-12
-    assert full_s < metrics["wall_time_s"]
+    assert metrics["full_in_worker"] and 0.0 <= metrics["full_wait_s"] < metrics["wall_time_s"]
+    # --inline: solved in this process as they start, nothing waited for (the solves are in
+    # the wall time instead); the same nodes (made by the motion between scans alone)
+    inline = tmp_path / "inline"
+    assert main(["slam2d", str(LOG), "--out", str(inline), "--quiet", "--inline"]) == 0
+    here = json.loads((inline / "metrics.json").read_text())
+    assert not here["full_in_worker"] and here["full_wait_s"] < 0.01
+    assert here["full_optimisation_s"] < here["wall_time_s"]
+    assert here["slam_nodes"] == metrics["slam_nodes"]
 
 
 def test_replay_lag_queues_scans_behind_slow_ones():

@@ -356,7 +356,21 @@ def make_parser() -> argparse.ArgumentParser:
         "--full-period",
         type=float,
         default=None,
-        help="log time [s] between full-graph optimisations after loops (default 1; 0: every scan)",
+        help="log time [s] between full-graph optimisations after loops (default 3; 0: every scan)",
+    )
+    m.add_argument(
+        "--full-budget",
+        type=float,
+        default=0.0,
+        metavar="MS_PER_NODE",
+        help="log time a full optimisation in the worker may take before the scans wait for "
+        "it: this many ms per graph node, at least the full period (default 0: the period)",
+    )
+    m.add_argument(
+        "--inline",
+        action="store_true",
+        help="solve each full optimisation in this process when it starts (default: in a worker "
+        "process while the scans go on, merged a full period later)",
     )
     m.add_argument("--quiet", action="store_true", help="no progress bar")
     m.set_defaults(func=cmd_slam2d)
@@ -438,6 +452,8 @@ def cmd_slam2d(args) -> int:
         raise ConfigError("command line", "--garbage", "a fraction in [0, 1]", args.garbage)
     if args.full_period is not None and not args.full_period >= 0.0:
         raise ConfigError("command line", "--full-period", "a time >= 0 s", args.full_period)
+    if not args.full_budget >= 0.0:
+        raise ConfigError("command line", "--full-budget", "ms per node >= 0", args.full_budget)
     metrics = run_slam2d(
         args.log,
         args.out,
@@ -447,6 +463,8 @@ def cmd_slam2d(args) -> int:
         progress=not args.quiet,
         garbage=args.garbage,
         seed=args.seed,
+        full_in_worker=not args.inline,
+        full_budget_ms_per_node=args.full_budget,
         **({} if args.full_period is None else {"full_period": args.full_period}),
     )
     width = max(len(k) for k in metrics)

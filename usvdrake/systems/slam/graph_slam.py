@@ -39,7 +39,6 @@ import copy
 import time
 from dataclasses import dataclass, field
 
-import gtsam
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -52,6 +51,14 @@ from usvdrake.systems.slam.correlative import (
 )
 from usvdrake.systems.slam.occupancy_mapping import LogOddsGrid
 from usvdrake.systems.slam.plicp import plicp, rot
+from usvdrake.systems.slam.pose_graph_solve import (
+    PoseGraphProblem,
+    PoseGraphSolution,
+    SolveFailed,
+    solve_pose_graph,
+    solved,
+    worker,
+)
 from usvdrake.systems.slam.robust_kernel import gtsam_barron
 
 
@@ -118,6 +125,9 @@ class GraphSlamConfig:
     landscape_temperature: float = 0.0
     min_sigma: list[float] = field(default_factory=lambda: [0.01, 0.01, 0.005])  # [m, m, rad] floor
     max_iterations: int = 100  # LM steps (002 §V-A)
+    # the full optimisations a loop asks for run in a worker process (002: its own thread),
+    # started and merged by the caller's slower event (GraphSlam.background); False: inline
+    full_in_worker: bool = True
     # De-skew each scan to its last beam with the last scan-to-scan motion as a constant
     # twist, when the scan says its beams fired over time (``LaserScan.time_increment`` > 0).
     # Ours, not 002's: on valley_survey the sweep's own motion biased the matches while
@@ -236,8 +246,9 @@ class GraphSlam:
             "failed_matches": 0,
         }
         self.full_pending = False
+        self._full_job = None  # (job, problem, node count) of the running full optimisation
         self._anchors, self._n_anchors = _AppendLog(), 0  # (time, node, pose relative to it)
-        self._robust = gtsam_barron(cfg.alpha, cfg.c)
+        gtsam_barron(cfg.alpha, cfg.c)  # a bad α or c fails here, not at the first solve
 
     # --- per scan -----------------------------------------------------------------------------
     def process(
@@ -547,78 +558,133 @@ class GraphSlam:
         return self.map.to_occupancy_grid()
 
     def background(self) -> None:
-        self.optimise_pending()
+        """The LeafSystem's slower event: merge the full optimisation started at the last
+        event (waiting for it if it is still running) and start the next one, if a loop asked
+        for it, in the worker process (``full_in_worker``). The result thus lands one event
+        after it started, whatever the machine: the simulation stays deterministic."""
+        self.finish_full()
+        self.start_full()
 
     def optimise_pending(self) -> bool:
-        """Run the full-graph optimisation a loop closure asked for (002 runs it in its own
-        thread; a LeafSystem runs it in its own, slower event). Returns whether it ran."""
-        if not self.full_pending:
+        """Run the full-graph optimisation a loop closure asked for, here and now, after
+        merging one still running. Returns whether one ran."""
+        merged = self.finish_full()
+        if self.start_full(in_worker=False):
+            merged = self.finish_full()
+        return merged
+
+    @property
+    def full_running(self) -> bool:
+        """Whether a full optimisation has started and is not merged yet."""
+        return self._full_job is not None
+
+    def start_full(self, in_worker: bool | None = None) -> bool:
+        """Start the full-graph optimisation a loop closure asked for, on a snapshot of the
+        graph: in the worker process (:func:`pose_graph_solve.worker`) or, with
+        ``in_worker`` False (default: ``not cfg.full_in_worker``), solved at once. Nothing
+        starts while one is running or when none is pending. Its result is merged by
+        :meth:`finish_full`. Returns whether one started."""
+        if not self.full_pending or self._full_job is not None:
             return False
-        t0 = time.perf_counter()
-        self.optimise(full=True)
+        problem, _ = self._problem(full=True)
+        in_worker = self.cfg.full_in_worker if in_worker is None else in_worker
+        job = worker().submit(problem) if in_worker else solved(problem)
+        self._full_job = (job, problem, len(self.nodes))
         self.full_pending = False
-        self.stats["full_optimisation_ms"].append((time.perf_counter() - t0) * 1e3)
+        return True
+
+    def finish_full(self) -> bool:
+        """Merge the running full optimisation's result, waiting for it if need be (the wait
+        is logged in ``stats["full_wait_ms"]``, its solve and merge in
+        ``stats["full_optimisation_ms"]``). Nodes added since it started move with the last
+        node it solved for. A job the worker failed is solved here. Returns whether
+        one was merged."""
+        if self._full_job is None:
+            return False
+        job, problem, n_nodes = self._full_job
+        self._full_job = None
+        t0 = time.perf_counter()
+        try:
+            solution = job.result()
+        except SolveFailed:
+            solution = solve_pose_graph(problem)
+        t1 = time.perf_counter()
+        self._apply(solution, n_nodes)
+        self.stats.setdefault("full_wait_ms", []).append((t1 - t0) * 1e3)
+        merge_ms = (time.perf_counter() - t1) * 1e3
+        self.stats["full_optimisation_ms"].append(solution.solve_ms + merge_ms)
         return True
 
     def optimise(self, full: bool = False) -> None:
-        """LM over the window (or the whole graph) with gtsam; moves nodes and re-renders them."""
+        """LM over the window (or the whole graph) with gtsam, here and now; moves nodes and
+        re-renders them."""
+        problem, _ = self._problem(full)
+        self._apply(solve_pose_graph(problem), len(self.nodes))
+
+    def _problem(self, full: bool) -> tuple[PoseGraphProblem, list[int]]:
+        """The window's (or the whole graph's) pose graph as plain data, and its nodes: the
+        active nodes' constraints (a window's are the list's tail), the nodes outside the
+        window that they reach held fixed, as is the oldest active node. In a full
+        optimisation with ``loop_gnc`` every loop is a GNC candidate with the
+        ``loop_min_sigma`` floor and nothing is robustified; otherwise loops GNC rejected last
+        are left out."""
         n = len(self.nodes)
         active = set(range(n)) if full else set(range(max(0, n - self.cfg.window), n))
         gnc = full and self.cfg.loop_gnc
-        graph = gtsam.NonlinearFactorGraph()
-        values = gtsam.Values()
-        used, inliers, loops = set(), [], []
         loop_floor = np.diag(np.square(self.cfg.loop_min_sigma))
         # a window's constraints are the list's tail (Node.first_constraint): not a scan of
         # the whole list per node, which on Intel's raw log (10 700 nodes) cost minutes
         start = 0 if full else self.nodes[min(active)].first_constraint
+        rows, covs, loop_ids, used = [], [], [], set()
         for n_c in range(start, len(self.constraints)):
             c = self.constraints[n_c]
             if not (c.i in active or c.j in active):
                 continue
-            if c.kind == "loop" and (gnc or n_c in self._rejected):
-                if not gnc:
-                    continue
-                loops.append((n_c, graph.size()))
-                noise = gtsam.noiseModel.Gaussian.Covariance(c.cov + loop_floor)
-            else:
-                inliers.append(graph.size())
-                noise = gtsam.noiseModel.Gaussian.Covariance(c.cov)
-                if c.robust and not gnc:
-                    noise = gtsam.noiseModel.Robust.Create(self._robust, noise)
-            graph.add(gtsam.BetweenFactorPose2(c.i, c.j, gtsam.Pose2(*c.z), noise))
+            candidate = c.kind == "loop" and gnc
+            if c.kind == "loop" and not gnc and n_c in self._rejected:
+                continue
+            rows.append(c)
+            covs.append(c.cov + loop_floor if candidate else c.cov)
+            loop_ids.append(n_c if candidate else -1)
             used.update((c.i, c.j))
-        fixed = gtsam.noiseModel.Diagonal.Sigmas(np.array([1e-6, 1e-6, 1e-7]))
         anchor = min(active)
-        for k in used | {anchor}:
-            values.insert(k, gtsam.Pose2(*self.nodes[k].pose))
-            if k not in active or k == anchor:
-                inliers.append(graph.size())
-                graph.add(gtsam.PriorFactorPose2(k, gtsam.Pose2(*self.nodes[k].pose), fixed))
-        params = gtsam.LevenbergMarquardtParams()
-        params.setMaxIterations(self.cfg.max_iterations)
-        if gnc and loops:
-            # graduated non-convexity with the truncated least squares loss (Yang et al.
-            # 2020): every loop is a candidate, the tracking chain and the anchor are known
-            # inliers; loops left with weight < 0.5 are outliers until the next full solve
-            gnc_params = gtsam.GncLMParams(params)
-            gnc_params.setLossType(gtsam.GncLossType.TLS)
-            gnc_params.setKnownInliers(inliers)
-            optimiser = gtsam.GncLMOptimizer(graph, values, gnc_params)
-            result = optimiser.optimize()
-            weights = np.asarray(optimiser.getWeights())
-            self._rejected = frozenset(n_c for n_c, f in loops if weights[f] < 0.5)
+        keys = list(used | {anchor})
+        problem = PoseGraphProblem(
+            keys=np.array(keys, int),
+            poses=np.array([self.nodes[k].pose for k in keys], float).reshape(-1, 3),
+            fixed=np.array([k not in active or k == anchor for k in keys], bool),
+            i=np.array([c.i for c in rows], int),
+            j=np.array([c.j for c in rows], int),
+            z=np.array([c.z for c in rows], float).reshape(-1, 3),
+            cov=np.array(covs, float).reshape(-1, 3, 3),
+            robust=np.array([c.robust and not gnc for c in rows], bool),
+            loop_id=np.array(loop_ids, int),
+            alpha=self.cfg.alpha,
+            c=self.cfg.c,
+            max_iterations=self.cfg.max_iterations,
+        )
+        return problem, sorted(keys)
+
+    def _apply(self, solution: PoseGraphSolution, n_nodes: int) -> None:
+        """Take the solved poses of ``solution`` (of the graph's first ``n_nodes`` nodes);
+        the nodes added after it was posed keep their pose relative to the last of those
+        nodes. Updates the GNC rejections, the current pose and the map."""
+        nodes = self.nodes
+        later = range(n_nodes, len(nodes))
+        rel = [between(nodes[n_nodes - 1].pose, nodes[k].pose) for k in later]
+        for k, pose in zip(solution.keys, solution.poses, strict=True):
+            nodes[k].pose = pose.copy()
+        for k, r in zip(later, rel, strict=True):
+            nodes[k].pose = compose(nodes[n_nodes - 1].pose, r)
+        if solution.rejected is not None:
+            self._rejected = solution.rejected
             self.stats["rejected_loops"] = len(self._rejected)
-        else:
-            result = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
-        solved = sorted(used | {anchor})
-        for k in solved:
-            p = result.atPose2(k)
-            self.nodes[k].pose = np.array([p.x(), p.y(), p.theta()])
-        self._sync_xy(solved)
-        self.pose = compose(self.nodes[-1].pose, self._rel)
-        # only the nodes just solved for can have moved since their last check
-        self._rerender_moved(solved)
+        moved = sorted(int(k) for k in solution.keys) + list(later)
+        self._sync_xy(moved)
+        self.pose = compose(nodes[-1].pose, self._rel)
+        # only the nodes just solved for (or carried along) can have moved since their last
+        # check
+        self._rerender_moved(moved)
 
     # --- map ------------------------------------------------------------------------------------
     def _render(self, node: Node) -> None:

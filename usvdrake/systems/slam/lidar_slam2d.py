@@ -29,7 +29,11 @@ class LidarSlam2D(LeafSystem):
     ``slam_covariance`` (9, row-major 3 × 3) the backend's pose covariance; ``slam_map`` an
     :class:`OccupancyGrid` rendered on demand. The update runs at the lidar's period and skips a
     scan it has already seen (by its time stamp); the backend's deferred heavy work (the graph's
-    full optimisation after a loop closure) runs in a separate 1 Hz event, never in a scan update.
+    full optimisation after a loop closure) is started by a separate 1 Hz event in a worker
+    process (``GraphSlamConfig.full_in_worker``) and merged by the next one, never in a scan
+    update: the scans are tracked while it solves, and the result lands one event after it
+    started however fast the machine is (a solve still running then is waited for), so a
+    simulation stays deterministic.
 
     A backend offers ``process_scan(scan)``, ``sensor_pose``, ``pose_covariance()``,
     ``occupancy()`` and ``background()``: :class:`GraphSlam` (here) or the Hector mapper
