@@ -10,8 +10,8 @@ poses after an SE(2) alignment. Prints one JSON object: per log ``ate_m`` (targe
 and ``keeps_up``: a factor ≥ 1 *and* a lag of at most ``MAX_LAG_S`` (a factor above 1 alone
 can hide a backlog that grows all through the log and only clears at its end), nodes, loops
 accepted and rejected by GNC, full optimisations (at most one started per 3 s of log time, in
-the worker process while the scans go on, merged 3 s later or, with ``--full-budget MS``, MS
-per graph node later if that is longer), the time they took and the time the scans waited for
+the worker process while the scans go on, merged 3 s later or, by ``--full-budget``, 2 ms per
+graph node later if that is longer), the time they took and the time the scans waited for
 them (``full_wait_s``); and ``reached`` per log.
 
 ``--raw``: run on the raw logs instead (``intel.clf.bz2`` … beside the ``corrected`` folder:
@@ -24,7 +24,7 @@ import json
 import tempfile
 from pathlib import Path
 
-from usvdrake.systems.slam.offline import run_slam2d
+from usvdrake.systems.slam.offline import FULL_BUDGET_MS_PER_NODE, run_slam2d
 
 LOGS = ("intel", "csail", "freiburg-079", "aces")
 RAW = {  # the raw log of each corrected one
@@ -49,10 +49,10 @@ def main() -> None:
     parser.add_argument(
         "--full-budget",
         type=float,
-        default=0.0,
+        default=FULL_BUDGET_MS_PER_NODE,
         metavar="MS_PER_NODE",
         help="log time each full optimisation may take in the worker, per graph node "
-        "(at least the 3 s period; default 0: the period)",
+        f"(at least the 3 s period; default {FULL_BUDGET_MS_PER_NODE}; 0: the period)",
     )
     args = parser.parse_args()
     data = Path(args.data)

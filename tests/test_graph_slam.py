@@ -467,6 +467,25 @@ def test_nodes_added_while_the_full_optimisation_runs_move_with_the_last_node_it
     assert len(slam.stats["full_wait_ms"]) == 1 == len(slam.stats["full_optimisation_ms"])
 
 
+def test_the_leafsystems_slower_event_merges_a_full_optimisation_one_event_later():
+    """``background()`` (LidarSlam2D's 1 Hz event) starts the full optimisation a loop asked
+    for in the worker and leaves the graph as it is; the next event merges it, whatever the
+    machine: the GNC result of the inline solve."""
+    slam, _ = _square_with_loops()
+    inline = copy.deepcopy(slam)
+    inline.optimise(full=True)
+    slam.full_pending = True
+    before = [nd.pose.copy() for nd in slam.nodes]
+    slam.background()
+    assert slam.full_running and not slam.full_pending
+    for nd, pose in zip(slam.nodes, before, strict=True):
+        np.testing.assert_array_equal(nd.pose, pose)
+    slam.background()
+    assert not slam.full_running and slam._rejected == inline._rejected
+    for nd, ref in zip(slam.nodes, inline.nodes, strict=True):
+        np.testing.assert_array_equal(nd.pose, ref.pose)
+
+
 def test_offline_runs_with_the_worker_equal_the_same_schedule_solved_here(
     pond_records, pond_offline, monkeypatch
 ):

@@ -361,10 +361,10 @@ def make_parser() -> argparse.ArgumentParser:
     m.add_argument(
         "--full-budget",
         type=float,
-        default=0.0,
+        default=None,
         metavar="MS_PER_NODE",
         help="log time a full optimisation in the worker may take before the scans wait for "
-        "it: this many ms per graph node, at least the full period (default 0: the period)",
+        "it: this many ms per graph node, at least the full period (default 2)",
     )
     m.add_argument(
         "--inline",
@@ -452,7 +452,7 @@ def cmd_slam2d(args) -> int:
         raise ConfigError("command line", "--garbage", "a fraction in [0, 1]", args.garbage)
     if args.full_period is not None and not args.full_period >= 0.0:
         raise ConfigError("command line", "--full-period", "a time >= 0 s", args.full_period)
-    if not args.full_budget >= 0.0:
+    if args.full_budget is not None and not args.full_budget >= 0.0:
         raise ConfigError("command line", "--full-budget", "ms per node >= 0", args.full_budget)
     metrics = run_slam2d(
         args.log,
@@ -464,8 +464,8 @@ def cmd_slam2d(args) -> int:
         garbage=args.garbage,
         seed=args.seed,
         full_in_worker=not args.inline,
-        full_budget_ms_per_node=args.full_budget,
         **({} if args.full_period is None else {"full_period": args.full_period}),
+        **({} if args.full_budget is None else {"full_budget_ms_per_node": args.full_budget}),
     )
     width = max(len(k) for k in metrics)
     for key, value in metrics.items():

@@ -1,5 +1,6 @@
 """``run_mission``: simulate a scenario's vessel diagram, record it, and measure it."""
 
+import copy
 import json
 import time
 from dataclasses import dataclass, field
@@ -323,6 +324,11 @@ def run_mission(
     if autonomy.HasSubsystemNamed("lidar_slam_2d"):
         slam_sys = autonomy.GetSubsystemByName("lidar_slam_2d")
         slam = slam_sys.slam(slam_sys.GetMyContextFromRoot(context))
+        if hasattr(slam, "optimise_pending"):
+            # the final estimate: a full optimisation still running (merged at the next 1 Hz
+            # event) or asked for when the mission ended is merged, in a copy of the state
+            slam = copy.deepcopy(slam)
+            slam.optimise_pending()
         metrics.update(
             slam_metrics(times, states, logs["slam_pose"].data().T, slam, mount=slam_sys.mount)
         )

@@ -95,6 +95,14 @@ LOG_CONFIG = GraphSlamConfig(
 # last optimised, and Intel's error is that sensitive.
 FULL_PERIOD = 3.0
 
+# [ms per graph node] of log time a full optimisation in the worker process may take before
+# the scans wait for it (at least FULL_PERIOD). A GNC solve's cost grows with the graph: on
+# Intel's raw log (10 733 nodes, up to 16 s a solve) a fixed 3 s left the scans waiting 692 s
+# in all and up to 423 s behind the recording (1.31x real time); 2 ms per node (21 s at the
+# end): 3.6 s of waiting, 16 s behind at most, 2.42x real time, ATE 0.180 -> 0.192 m (fewer,
+# later merges: 567 -> 276 full optimisations).
+FULL_BUDGET_MS_PER_NODE = 2.0
+
 
 def corrupt_scans(scans: list, fraction: float, seed: int = 0) -> tuple[list, np.ndarray]:
     """A copy of ``scans`` (records with ``.scan``) where a ``fraction`` of them, chosen at
@@ -139,7 +147,7 @@ def run_graph_slam(
     cfg: GraphSlamConfig,
     progress: bool = False,
     full_period: float = FULL_PERIOD,
-    full_budget_ms_per_node: float = 0.0,
+    full_budget_ms_per_node: float = FULL_BUDGET_MS_PER_NODE,
 ):
     """(timestamps, poses (n × 3), slam) for a sequence of CarmenScan-like records.
 
@@ -223,7 +231,7 @@ def run_slam2d(
     config: GraphSlamConfig | None = None,
     full_period: float = FULL_PERIOD,
     full_in_worker: bool | None = None,
-    full_budget_ms_per_node: float = 0.0,
+    full_budget_ms_per_node: float = FULL_BUDGET_MS_PER_NODE,
 ) -> dict:
     """Run the graph SLAM on a CARMEN log, a ROS bag or a mission log; write trajectory.tum,
     map.png, metrics.json. ``garbage``: the fraction of scans replaced by garbage first
