@@ -331,7 +331,9 @@ def test_offline_full_optimisations_are_throttled_to_the_log_time(pond_records, 
     records, truth = pond_records
     span = records[-1].timestamp - records[0].timestamp
     assert FULL_PERIOD == 3.0  # pond_offline ran at the default
-    runs = {0.0: run_graph_slam(records, POND_GRID, full_period=0.0), 3.0: pond_offline}
+    # every scan, merged at the next (no budget beyond the period)
+    every_scan = run_graph_slam(records, POND_GRID, full_period=0.0, full_budget_ms_per_node=0.0)
+    runs = {0.0: every_scan, 3.0: pond_offline}
     every = runs[0.0][2].stats
     assert every["loops"] >= 5 and len(every["full_optimisation_ms"]) == every["loops"]
     slam = runs[3.0][2]
@@ -401,9 +403,9 @@ def test_the_worker_process_solves_a_pose_graph_as_it_is_solved_here():
     from usvdrake.systems.slam.pose_graph_solve import solve_pose_graph, worker
 
     slam, _ = _square_with_loops()
-    gnc, _ = slam._problem(full=True)
+    gnc = slam._problem(full=True)
     slam.cfg = replace(slam.cfg, loop_gnc=False)
-    robust, _ = slam._problem(full=True)
+    robust = slam._problem(full=True)
     assert (gnc.loop_id >= 0).sum() == 2 and not gnc.robust.any()
     assert (robust.loop_id < 0).all() and robust.robust.sum() == 20
     jobs = [worker().submit(problem) for problem in (gnc, robust)]
@@ -422,7 +424,7 @@ def test_a_job_the_worker_fails_is_solved_here_and_a_dead_worker_replaced():
     from usvdrake.systems.slam.pose_graph_solve import SolveFailed, worker
 
     slam, truth = _square_with_loops()
-    problem, _ = slam._problem(full=True)
+    problem = slam._problem(full=True)
     broken = replace(problem, i=problem.i + 100)  # constraints on nodes the graph lacks
     with pytest.raises(SolveFailed, match="Error|error|exception|Exception"):
         worker().submit(broken).result()
@@ -431,6 +433,7 @@ def test_a_job_the_worker_fails_is_solved_here_and_a_dead_worker_replaced():
     slam.full_pending = True
     assert slam.start_full(in_worker=True) and slam.full_running
     first._proc.kill()
+    first._proc.wait()
     assert slam.finish_full() and not slam.full_running
     assert slam._rejected == {len(slam.constraints) - 1}  # solved here all the same
     assert (

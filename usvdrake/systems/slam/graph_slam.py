@@ -580,13 +580,13 @@ class GraphSlam:
 
     def start_full(self, in_worker: bool | None = None) -> bool:
         """Start the full-graph optimisation a loop closure asked for, on a snapshot of the
-        graph: in the worker process (:func:`pose_graph_solve.worker`) or, with
-        ``in_worker`` False (default: ``not cfg.full_in_worker``), solved at once. Nothing
+        graph: in the worker process (:func:`pose_graph_solve.worker`) or solved here at
+        once, as ``in_worker`` says (default: ``cfg.full_in_worker``). Nothing
         starts while one is running or when none is pending. Its result is merged by
         :meth:`finish_full`. Returns whether one started."""
         if not self.full_pending or self._full_job is not None:
             return False
-        problem, _ = self._problem(full=True)
+        problem = self._problem(full=True)
         in_worker = self.cfg.full_in_worker if in_worker is None else in_worker
         job = worker().submit(problem) if in_worker else solved(problem)
         self._full_job = (job, problem, len(self.nodes))
@@ -618,16 +618,15 @@ class GraphSlam:
     def optimise(self, full: bool = False) -> None:
         """LM over the window (or the whole graph) with gtsam, here and now; moves nodes and
         re-renders them."""
-        problem, _ = self._problem(full)
+        problem = self._problem(full)
         self._apply(solve_pose_graph(problem), len(self.nodes))
 
-    def _problem(self, full: bool) -> tuple[PoseGraphProblem, list[int]]:
-        """The window's (or the whole graph's) pose graph as plain data, and its nodes: the
-        active nodes' constraints (a window's are the list's tail), the nodes outside the
-        window that they reach held fixed, as is the oldest active node. In a full
-        optimisation with ``loop_gnc`` every loop is a GNC candidate with the
-        ``loop_min_sigma`` floor and nothing is robustified; otherwise loops GNC rejected last
-        are left out."""
+    def _problem(self, full: bool) -> PoseGraphProblem:
+        """The window's (or the whole graph's) pose graph as plain data: the active nodes'
+        constraints (a window's are the list's tail), the nodes outside the window that they
+        reach held fixed, as is the oldest active node. In a full optimisation with
+        ``loop_gnc`` every loop is a GNC candidate with the ``loop_min_sigma`` floor and
+        nothing is robustified; otherwise loops GNC rejected last are left out."""
         n = len(self.nodes)
         active = set(range(n)) if full else set(range(max(0, n - self.cfg.window), n))
         gnc = full and self.cfg.loop_gnc
@@ -663,7 +662,7 @@ class GraphSlam:
             c=self.cfg.c,
             max_iterations=self.cfg.max_iterations,
         )
-        return problem, sorted(keys)
+        return problem
 
     def _apply(self, solution: PoseGraphSolution, n_nodes: int) -> None:
         """Take the solved poses of ``solution`` (of the graph's first ``n_nodes`` nodes);

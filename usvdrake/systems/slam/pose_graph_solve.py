@@ -166,7 +166,7 @@ class PoseGraphWorker:
         self._done: dict[int, object] = {}
         self._cv = threading.Condition()
         self._next = 0
-        self.alive = True
+        self._alive = True  # until its answers' pipe closes
         threading.Thread(target=self._send, daemon=True).start()
         threading.Thread(target=self._receive, daemon=True).start()
 
@@ -178,7 +178,7 @@ class PoseGraphWorker:
 
     def wait(self, job_id: int) -> PoseGraphSolution:
         with self._cv:
-            self._cv.wait_for(lambda: job_id in self._done or not self.alive)
+            self._cv.wait_for(lambda: job_id in self._done or not self._alive)
             answer = self._done.pop(job_id, None)
         if not isinstance(answer, PoseGraphSolution):
             raise SolveFailed(answer or "the pose graph worker process exited")
@@ -199,17 +199,28 @@ class PoseGraphWorker:
 
     def _receive(self) -> None:
         pipe = self._proc.stdout
-        while len(head := pipe.read(8)) == 8:
-            job_id, answer = pickle.loads(pipe.read(struct.unpack("<Q", head)[0]))
-            with self._cv:
-                self._done[job_id] = answer
-                self._cv.notify_all()
-        self._dead()
+        try:  # until the pipe closes or breaks off mid-frame (the worker died)
+            while len(head := pipe.read(8)) == 8:
+                size = struct.unpack("<Q", head)[0]
+                frame = pipe.read(size)
+                if len(frame) != size:
+                    break
+                job_id, answer = pickle.loads(frame)
+                with self._cv:
+                    self._done[job_id] = answer
+                    self._cv.notify_all()
+        finally:
+            self._dead()
 
     def _dead(self) -> None:
         with self._cv:
-            self.alive = False
+            self._alive = False
             self._cv.notify_all()
+
+    @property
+    def alive(self) -> bool:
+        """Whether it still serves: its process runs and its answers' pipe is open."""
+        return self._alive and self._proc.poll() is None
 
 
 _WORKER: PoseGraphWorker | None = None
