@@ -313,7 +313,7 @@ def run_slam2d(
         "full_optimisation_s": float(sum(slam.stats["full_optimisation_ms"]) / 1e3),
         # in a worker process (the scans tracked meanwhile), and [s] the scans waited for them
         "full_in_worker": cfg.full_in_worker,
-        "full_wait_s": float(sum(slam.stats.get("full_wait_ms", [])) / 1e3),
+        "full_wait_s": float(sum(slam.stats["full_wait_ms"]) / 1e3),
         "full_budget_ms_per_node": full_budget_ms_per_node,
         "wall_time_s": wall,
         "log_duration_s": duration,

@@ -191,8 +191,7 @@ class PoseGraphWorker:
         pipe = self._proc.stdin
         try:
             while (frame := self._outbox.get()) is not None:
-                pipe.write(struct.pack("<Q", len(frame)) + frame)
-                pipe.flush()
+                _write_frame(pipe, frame)
             pipe.close()
         except OSError:
             self._dead()
@@ -200,11 +199,7 @@ class PoseGraphWorker:
     def _receive(self) -> None:
         pipe = self._proc.stdout
         try:  # until the pipe closes or breaks off mid-frame (the worker died)
-            while len(head := pipe.read(8)) == 8:
-                size = struct.unpack("<Q", head)[0]
-                frame = pipe.read(size)
-                if len(frame) != size:
-                    break
+            while (frame := _read_frame(pipe)) is not None:
                 job_id, answer = pickle.loads(frame)
                 with self._cv:
                     self._done[job_id] = answer
@@ -221,6 +216,23 @@ class PoseGraphWorker:
     def alive(self) -> bool:
         """Whether it still serves: its process runs and its answers' pipe is open."""
         return self._alive and self._proc.poll() is None
+
+
+def _write_frame(pipe, frame: bytes) -> None:
+    """One message on a pipe: its length (8 bytes, little-endian), then its bytes."""
+    pipe.write(struct.pack("<Q", len(frame)) + frame)
+    pipe.flush()
+
+
+def _read_frame(pipe) -> bytes | None:
+    """The next message :func:`_write_frame` put on ``pipe``; None when the pipe closed,
+    even mid-message (its writer died)."""
+    head = pipe.read(8)
+    if len(head) != 8:
+        return None
+    size = struct.unpack("<Q", head)[0]
+    frame = pipe.read(size)
+    return frame if len(frame) == size else None
 
 
 _WORKER: PoseGraphWorker | None = None
@@ -246,13 +258,10 @@ def _serve() -> None:
     one: anything printed while solving goes to stderr), until stdin closes."""
     out = os.fdopen(os.dup(1), "wb")
     os.dup2(2, 1)
-    read = sys.stdin.buffer.read
-    while len(head := read(8)) == 8:
-        job_id, problem = pickle.loads(read(struct.unpack("<Q", head)[0]))
+    while (frame := _read_frame(sys.stdin.buffer)) is not None:
+        job_id, problem = pickle.loads(frame)
         try:
             answer = solve_pose_graph(problem)
         except Exception as error:  # sent back: the caller solves it itself and sees it
             answer = f"{type(error).__name__}: {error}"
-        frame = pickle.dumps((job_id, answer), pickle.HIGHEST_PROTOCOL)
-        out.write(struct.pack("<Q", len(frame)) + frame)
-        out.flush()
+        _write_frame(out, pickle.dumps((job_id, answer), pickle.HIGHEST_PROTOCOL))
