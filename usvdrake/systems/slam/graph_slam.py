@@ -49,8 +49,9 @@ from usvdrake.systems.slam.correlative import (
     lateral_motion,
     match_covariance,
 )
+from usvdrake.systems.slam.hector import match_scan
 from usvdrake.systems.slam.occupancy_mapping import LogOddsGrid
-from usvdrake.systems.slam.plicp import plicp, rot
+from usvdrake.systems.slam.plicp import PlicpResult, plicp, plicp_at, rot
 from usvdrake.systems.slam.pose_graph_solve import (
     PoseGraphProblem,
     PoseGraphSolution,
@@ -85,6 +86,10 @@ class GraphSlamConfig:
     # (correlative.lateral_motion: 0 along any arc; for vehicles that cannot slide; 0: off)
     lateral_weight: float = 0.0
     refine_max_distance: float = 1.0  # [m] PLICP's pairing distance refining the search
+    # PLICP's refinement of the search's pose that does not converge (it slid along a corridor,
+    # or cycles) is set against a Gauss-Newton ascent of the search's own likelihood field from
+    # that pose (Kohlbrecher 2011 eqs. 4-11, hector.match_scan); the higher score is kept
+    field_refine_unconverged: bool = False
     search_resolution: float = 0.05  # [m] its grid (and the likelihood field's cells)
     search_sigma: float = 0.1  # [m] width of a reference point in the likelihood field
     min_link_points: int = 40  # correspondences a match needs
@@ -295,6 +300,12 @@ class GraphSlam:
                 tree=last.tree,
                 max_distance=self.cfg.refine_max_distance,
             )
+            if self.cfg.field_refine_unconverged and not retry.converged:
+                alt = self._field_refine(last, points, seed)
+                if alt.n_valid >= 3 and self._score(last, points, alt) > self._score(
+                    last, points, retry
+                ):
+                    retry = alt
             # no time since the last scan (identical stamps): no motion model to favour
             timed = self._last_t is not None and t > self._last_t
             margin = self.cfg.search_prior_margin if timed else 0.0
@@ -343,6 +354,19 @@ class GraphSlam:
         self._record(t)
         self.stats["tracking_ms"].append((time.perf_counter() - t0) * 1e3)
         return self.pose.copy()
+
+    def _field_refine(self, node: Node, points: np.ndarray, seed) -> PlicpResult:
+        """``points`` matched to ``node``'s scan by Gauss-Newton on its tracking likelihood
+        field (values in [0, 1], 1 on the surfaces: the map M of Kohlbrecher 2011 eqs. 4-11,
+        bilinearly interpolated, :func:`hector.match_scan`) from ``seed``, as a
+        :class:`PlicpResult` at that pose (:func:`plicp_at`). The field is the objective the
+        correlative search maximised on its grid, so this ascends to its maximum between the
+        grid's cells instead of sliding to PLICP's distant fixed point."""
+        field = node.field(self.cfg)
+        pose = match_scan(field.fine, tuple(field.origin), field.resolution, points, seed, 20)[0]
+        return plicp_at(
+            node.points, points, pose, max_distance=self.cfg.refine_max_distance, tree=node.tree
+        )
 
     def _score(self, node: Node, points: np.ndarray, res) -> float:
         """Likelihood score of ``points`` at a match result in ``node``'s field, less the

@@ -260,17 +260,9 @@ def plicp(
     fine = len(active) == len(current)
     for _ in range(max_iterations):
         moved = current[active] @ rot(theta).T + t
-        i, j1, j2 = find_correspondences(tree, reference, moved, max_distance, max_segment)
+        i, j1, j2, n = _trimmed_pairs(tree, reference, moved, max_distance, max_segment, trim)
         if len(i) < 3:
             break
-        a, b = reference[j1], reference[j2]
-        n = line_normals(a, b)
-        err = np.abs(np.einsum("ij,ij->i", n, moved[i] - a))
-        keep = max(3, int(np.ceil(trim * len(i))))
-        if keep < len(i):
-            idx = np.argpartition(err, keep - 1)[:keep]
-            idx.sort()
-            i, j1, j2, n = i[idx], j1[idx], j2[idx], n[idx]
         i = active[i]
         key = np.concatenate([i, j1, j2])
         if prev_key is not None and key.shape == prev_key.shape and np.array_equal(key, prev_key):
@@ -296,15 +288,69 @@ def plicp(
             converged = True
             break
     if sel_n is not None:
-        i, j1, j2, n = sel_n
-        sel = np.column_stack([i, j1, j2])
-        moved_i = current[i] @ rot(theta).T + t
-        residual = float(np.sqrt(np.mean(np.einsum("ij,ij->i", n, moved_i - reference[j1]) ** 2)))
+        sel, residual = _selection(reference, current, t, theta, *sel_n)
     return PlicpResult(
         t=t,
         theta=theta,
         iterations=iterations,
         converged=converged,
+        n_valid=len(sel),
+        residual=residual,
+        correspondences=sel,
+    )
+
+
+def _trimmed_pairs(tree, reference, moved, max_distance, max_segment, trim):
+    """PLICP's correspondences of the ``moved`` points (:func:`find_correspondences`), the
+    ``trim`` fraction with the least point-to-line error kept (in point order): (i, j1, j2,
+    line normals)."""
+    i, j1, j2 = find_correspondences(tree, reference, moved, max_distance, max_segment)
+    n = line_normals(reference[j1], reference[j2])
+    err = np.abs(np.einsum("ij,ij->i", n, moved[i] - reference[j1]))
+    keep = max(3, int(np.ceil(trim * len(i))))
+    if keep < len(i):
+        idx = np.argpartition(err, keep - 1)[:keep]
+        idx.sort()
+        i, j1, j2, n = i[idx], j1[idx], j2[idx], n[idx]
+    return i, j1, j2, n
+
+
+def _selection(reference, current, t, theta, i, j1, j2, n) -> tuple[np.ndarray, float]:
+    """(correspondences (m × 3: i, j1, j2), RMS point-to-line error [m]) of the pairs at the
+    pose (t, θ)."""
+    moved_i = current[i] @ rot(theta).T + t
+    residual = float(np.sqrt(np.mean(np.einsum("ij,ij->i", n, moved_i - reference[j1]) ** 2)))
+    return np.column_stack([i, j1, j2]), residual
+
+
+def plicp_at(
+    reference: np.ndarray,
+    current: np.ndarray,
+    pose,
+    max_distance: float = 1.0,
+    max_segment: float = 1.0,
+    trim: float = 0.9,
+    tree: cKDTree | None = None,
+) -> PlicpResult:
+    """The :class:`PlicpResult` of ``current`` held at ``pose`` = (t_x [m], t_y [m], θ [rad])
+    against ``reference``: the trimmed correspondences PLICP would pair there and their RMS
+    point-to-line error, no solve (``iterations`` 0, ``converged``). For a pose found by other
+    means (a likelihood-field refinement) that must pass PLICP's checks and feed Censi's
+    covariance like a PLICP match."""
+    reference = np.asarray(reference, float)
+    current = np.asarray(current, float)
+    tree = cKDTree(reference) if tree is None else tree
+    t, theta = np.array(pose[:2], float), float(pose[2])
+    moved = current @ rot(theta).T + t
+    i, j1, j2, n = _trimmed_pairs(tree, reference, moved, max_distance, max_segment, trim)
+    sel, residual = np.zeros((0, 3), int), np.inf
+    if len(i) >= 3:
+        sel, residual = _selection(reference, current, t, theta, i, j1, j2, n)
+    return PlicpResult(
+        t=t,
+        theta=theta,
+        iterations=0,
+        converged=True,
         n_valid=len(sel),
         residual=residual,
         correspondences=sel,
