@@ -605,3 +605,34 @@ def test_without_a_time_base_the_search_is_not_outweighed_by_the_motion_model():
     assert np.hypot(*final[0.0][:2]) > 0.3  # timed: the margin kept the guess's match
     assert np.hypot(*final[5.0][:2]) < 0.03  # untimed: the search found the start again
     assert abs(final[5.0][2]) < np.deg2rad(0.5)
+
+
+def test_an_unconverged_refinement_keeps_the_searched_step_in_a_corridor():
+    """MIT-CSAIL's scans 117 -> 118 of its corrected log (two raw scans copied into
+    tests/data/carmen): the robot drives 1.145 m down a corridor by the corrected poses. The
+    correlative search finds 1.10 m; PLICP refining it does not converge and slides down the
+    corridor to 0.86 m. With field_refine_unconverged the likelihood field's Gauss-Newton
+    ascent from the search's pose is kept instead (1.13 m), as LOG_CONFIG does."""
+    from pathlib import Path
+
+    from usvdrake.logs.carmen import read_carmen
+    from usvdrake.systems.slam.offline import LOG_CONFIG
+
+    recs = list(read_carmen(Path(__file__).parent / "data/carmen/mit-csail-117.clf"))
+    steps = {}
+    for on in (False, True):
+        cfg = replace(
+            LOG_CONFIG,
+            field_refine_unconverged=on,
+            map_origin=[-50.0, -50.0],
+            map_size=[100.0, 100.0],
+            full_in_worker=False,
+        )
+        slam = GraphSlam(cfg)
+        for rec in recs:
+            slam.process_scan(replace(rec.scan, time=rec.timestamp))
+        assert len(slam.nodes) == 2
+        steps[on] = between(slam.nodes[0].pose, slam.nodes[1].pose)
+    assert steps[False][0] < 0.95  # the slide this option exists for
+    assert abs(steps[True][0] - 1.145) < 0.05
+    assert abs(steps[True][1] + 0.057) < 0.05 and abs(steps[True][2]) < 0.02

@@ -153,3 +153,24 @@ def test_covariance_grows_along_corridor():
     # The scan's x axis is (nearly) the corridor axis.
     assert np.all(np.isfinite(cov)) and cov[0, 0] < 1e-4  # σ_x of a few mm: constrained
     assert cov[0, 0] > 20 * cov[1, 1]
+
+
+def test_plicp_at_a_converged_pose_is_plicps_own_result():
+    """plicp_at pairs and scores a given pose as PLICP does: at PLICP's converged pose it
+    returns PLICP's residual and number of pairs; 10 cm off it is worse; nothing paired far
+    away."""
+    from usvdrake.systems.slam.plicp import plicp_at
+
+    scene = cluttered_room()
+    p1, p2 = (0.0, 0.0, 0.0), (0.3, 0.1, 0.05)
+    ref, cur = to_points(ranges(scene, p1)), to_points(ranges(scene, p2))
+    res = plicp(ref, cur)
+    assert res.converged
+    at = plicp_at(ref, cur, (*res.t, res.theta))
+    assert at.iterations == 0 and at.converged
+    # PLICP's pairs are those of its last solve, made a step (below its tolerance) earlier
+    assert abs(at.n_valid - res.n_valid) <= 0.01 * res.n_valid
+    assert abs(at.residual - res.residual) < 1e-4
+    off = plicp_at(ref, cur, (res.t[0] + 0.1, res.t[1] + 0.1, res.theta))
+    assert off.residual > res.residual + 0.02
+    np.testing.assert_array_equal(plicp_at(ref, cur, (1e3, 1e3, 0.0)).correspondences.shape, (0, 3))
