@@ -6,6 +6,8 @@
   correlative search (Olson 2009, :mod:`correlative`) over ± ``search_linear_window`` /
   ± ``search_angular_window``, which wins if its likelihood is ``search_prior_margin`` higher
   (if the scans' stamps give the motion a time base; otherwise the higher likelihood wins).
+  With ``field_refine_unconverged``, a PLICP refinement of the searched pose that does not
+  converge competes with a Gauss-Newton ascent of the search's likelihood field (Hector's).
 * **Nodes**: a new node when the match exceeds ``node_translation`` or ``node_rotation``. Its
   consecutive constraint (to the previous node) carries the Censi covariance (002 eqs. 4-10)
   — or, with ``landscape_temperature``, the spread of the tracking field's score around the
