@@ -365,7 +365,9 @@ class GraphSlam:
         correlative search maximised on its grid, so this ascends to its maximum between the
         grid's cells instead of sliding to PLICP's distant fixed point."""
         field = node.field(self.cfg)
-        pose = match_scan(field.fine, tuple(field.origin), field.resolution, points, seed, 20)[0]
+        pose = match_scan(
+            field.fine, tuple(field.origin), field.resolution, points, seed, iterations=20
+        )[0]
         return plicp_at(
             node.points, points, pose, max_distance=self.cfg.refine_max_distance, tree=node.tree
         )
