@@ -54,6 +54,13 @@ def main() -> None:
         help="log time each full optimisation may take in the worker, per graph node "
         f"(at least the 3 s period; default {FULL_BUDGET_MS_PER_NODE}; 0: the period)",
     )
+    parser.add_argument(
+        "--relink",
+        type=float,
+        default=None,
+        metavar="RADIUS",
+        help="relink each final estimate within RADIUS [m] (GraphSlam.relink; default off)",
+    )
     args = parser.parse_args()
     data = Path(args.data)
     if not data.is_dir():
@@ -74,6 +81,7 @@ def main() -> None:
                 reference=reference,
                 progress=False,
                 full_budget_ms_per_node=args.full_budget,
+                relink_radius=args.relink,
             )
             results[name] = {
                 "log": log.name,
@@ -84,6 +92,8 @@ def main() -> None:
                 "slam_nodes": m["slam_nodes"],
                 "slam_loops": m["slam_loops"],
                 "rejected_loops": m["rejected_loops"],
+                "relinks": m["relinks"],
+                "relink_s": m["relink_s"],
                 "tracking_ms_median": m["tracking_ms_median"],
                 "wall_time_s": m["wall_time_s"],
                 "full_optimisations": m["full_optimisations"],
@@ -104,6 +114,7 @@ def main() -> None:
                 "benchmark": "slam2d_logs",
                 "raw": args.raw,
                 "full_budget_ms_per_node": args.full_budget,
+                "relink_radius_m": args.relink,
                 "target_ate_m": TARGET_ATE,
                 "logs": results,
             },

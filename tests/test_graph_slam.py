@@ -636,3 +636,53 @@ def test_an_unconverged_refinement_keeps_the_searched_step_in_a_corridor():
     assert steps[False][0] < 0.95  # the slide this option exists for
     assert abs(steps[True][0] - 1.145) < 0.05
     assert abs(steps[True][1] + 0.057) < 0.05 and abs(steps[True][2]) < 0.02
+
+
+def _drifted_chain(cfg: GraphSlamConfig):
+    """A GraphSlam over eight scans of the cluttered room along x (1 m apart) whose consecutive
+    constraints measured each step 3 cm long and 0.6° left: the chain's optimum drifts from
+    the truth, as a tracking bias would make it. Returns (slam, truth)."""
+    from usvdrake.systems.slam.graph_slam import Constraint, Node
+
+    truth = np.array([[-5.0 + k, -1.0, 0.0] for k in range(8)])
+    step_error = np.array([0.03, 0.0, np.deg2rad(0.6)])
+    slam = GraphSlam(cfg)
+    pose = truth[0].copy()
+    for k, true_pose in enumerate(truth):
+        if k:
+            z = between(truth[k - 1], true_pose) + step_error
+            pose = compose(pose, z)
+            cov = np.diag([0.05, 0.05, 0.02]) ** 2
+            slam.constraints.append(Constraint(k - 1, k, z, cov, True, "consecutive"))
+        pts = _sector_scan(true_pose, 360)
+        slam.nodes.append(Node(pose.copy(), pts, np.ones(len(pts)), np.zeros(len(pts)), k))
+        slam.nodes[-1].tree = cKDTree(pts)
+    return slam, truth
+
+
+def test_relinking_the_final_estimate_pulls_a_drifted_chain_back():
+    """``relink_radius``: after the last scan every node is matched to the older nodes within
+    the radius (index gap ≥ 2) from the current estimate and the graph re-optimised: the links
+    measure what the biased chain of steps could not. Off (radius 0) nothing changes."""
+    cfg = GraphSlamConfig(
+        map_size=[30.0, 20.0], map_origin=[-15.0, -10.0], full_in_worker=False, loop_gnc=True
+    )
+    off, truth = _drifted_chain(cfg)
+    before = np.array([n.pose for n in off.nodes])
+    assert off.relink() == 0
+    assert np.array_equal(np.array([n.pose for n in off.nodes]), before)
+    drift = np.hypot(*(before[:, :2] - truth[:, :2]).T)
+    assert drift[-1] > 0.25  # the chain alone ends a quarter metre off
+
+    slam, _ = _drifted_chain(replace(cfg, relink_radius=5.0))
+    added = slam.relink()
+    assert added == slam.stats["relinks"] >= 15  # (0, 2..5), (1, 3..6), ... within 5 m
+    links = [c for c in slam.constraints if c.kind == "loop"]
+    assert {(c.i, c.j) for c in links} >= {(0, 2), (0, 4), (2, 6)}
+    for c in links:  # each link is the scans' own relative pose, not the drifted chain's
+        true_z = between(truth[c.i], truth[c.j])
+        assert np.hypot(*(c.z[:2] - true_z[:2])) < 0.02
+    after = np.array([n.pose for n in slam.nodes])
+    err = np.hypot(*(after[:, :2] - truth[:, :2]).T)
+    assert err.max() < 0.3 * drift.max()
+    assert slam.stats["relink_ms"] > 0

@@ -88,6 +88,21 @@ def test_slam2d_scores_a_raw_log_against_its_corrected_log_scan_by_scan(tmp_path
     assert metrics["ate_m"] > 0.05  # the drift the corrected poses carry is seen
 
 
+def test_slam2d_relink_links_the_final_estimate_and_refuses_a_negative_radius(tmp_path, capsys):
+    """``--relink RADIUS``: after the last scan the nodes are linked to the older ones within
+    the radius and the graph optimised again; the links and their time are in the metrics (the
+    time inside the wall time); a negative radius is a one-line error."""
+    out = tmp_path / "relinked"
+    assert main(["slam2d", str(LOG), "--out", str(out), "--quiet", "--relink", "3"]) == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["slam_nodes"] >= 3 and metrics["relinks"] >= 1
+    assert 0.0 < metrics["relink_s"] < metrics["wall_time_s"]
+    t, xyz, _ = read_tum(out / "trajectory.tum")
+    assert len(t) == 200 and np.all(np.isfinite(xyz))
+    assert main(["slam2d", str(LOG), "--out", str(out), "--quiet", "--relink", "-1"]) == 2
+    assert "--relink" in capsys.readouterr().err
+
+
 def test_slam2d_missing_log_is_one_line(tmp_path, capsys):
     assert main(["slam2d", str(tmp_path / "nope.clf"), "--out", str(tmp_path)]) == 2
     assert "no such file" in capsys.readouterr().err

@@ -372,6 +372,14 @@ def make_parser() -> argparse.ArgumentParser:
         help="solve each full optimisation in this process when it starts (default: in a worker "
         "process while the scans go on, merged a full period later)",
     )
+    m.add_argument(
+        "--relink",
+        type=float,
+        default=None,
+        metavar="RADIUS",
+        help="after the last scan, link every node to the older ones within RADIUS [m] by PLICP "
+        "from the final estimate and optimise again (slow: all pairs; default off)",
+    )
     m.add_argument("--quiet", action="store_true", help="no progress bar")
     m.set_defaults(func=cmd_slam2d)
     s3 = sub.add_parser("slam3d", help="lidar-IMU-GPS factor-graph SLAM (000 §V) on a recording")
@@ -454,6 +462,8 @@ def cmd_slam2d(args) -> int:
         raise ConfigError("command line", "--full-period", "a time >= 0 s", args.full_period)
     if args.full_budget is not None and not args.full_budget >= 0.0:
         raise ConfigError("command line", "--full-budget", "ms per node >= 0", args.full_budget)
+    if args.relink is not None and not args.relink >= 0.0:
+        raise ConfigError("command line", "--relink", "a radius >= 0 m", args.relink)
     metrics = run_slam2d(
         args.log,
         args.out,
@@ -464,6 +474,7 @@ def cmd_slam2d(args) -> int:
         garbage=args.garbage,
         seed=args.seed,
         full_in_worker=not args.inline,
+        relink_radius=args.relink,
         **({} if args.full_period is None else {"full_period": args.full_period}),
         **({} if args.full_budget is None else {"full_budget_ms_per_node": args.full_budget}),
     )

@@ -95,6 +95,7 @@ class GraphSlamConfig:
     search_resolution: float = 0.05  # [m] its grid (and the likelihood field's cells)
     search_sigma: float = 0.1  # [m] width of a reference point in the likelihood field
     min_link_points: int = 40  # correspondences a match needs
+    trim: float = 0.9  # fraction of PLICP's pairs kept, least point-to-line error first
     # [m] RMS point-to-line error above which a tracking match failed (garbage, a blinded or
     # half-empty scan): the pose follows the constant-velocity guess and the scan never
     # becomes a node, so it cannot become the reference of the scans after it
@@ -118,6 +119,15 @@ class GraphSlamConfig:
     loop_min_sigma: list[float] = field(default_factory=lambda: [0.03, 0.03, 0.01])
     loop_per_chain: bool = False  # match one node per pass near the new node, not every one
     loop_max_chains: int = 8  # [-] passes matched per new node, nearest first
+    # [m] > 0: after the last scan (GraphSlam.relink, offline), every node is matched by PLICP
+    # from the final estimate to the older nodes within this radius (index gap ≥ 2; at most
+    # relink_max_links of them, spread over their indices; 0: all), a match moving less than
+    # relink_max_correction [m] from it, scoring min_loop_score and passing the link checks is
+    # added as a loop (GNC candidate, tracking covariance), and the whole graph is optimised
+    # once more (ours, not 002's)
+    relink_radius: float = 0.0
+    relink_max_links: int = 0
+    relink_max_correction: float = 0.3
     loop_angular_window: float = 0.5  # [rad]
     loop_distinct: float = 0.5  # [m] a runner-up pose this far from the best is a rival
     max_loop_ambiguity: float = 0.9  # [-] rival score / best score above which a loop is refused
@@ -280,7 +290,7 @@ class GraphSlam:
             return self.pose.copy()
         last = self.nodes[-1]
         guess = compose(self._rel, self._last_step)  # constant velocity
-        res = plicp(last.points, points, initial=tuple(guess), tree=last.tree)
+        res = plicp(last.points, points, initial=tuple(guess), tree=last.tree, trim=self.cfg.trim)
         trigger = self.cfg.correlative_trigger * self.cfg.max_link_residual
         if res.n_valid < self.cfg.min_link_points or res.residual > trigger:
             # a failed match from the constant-velocity guess: seed PLICP by a correlative search
@@ -301,6 +311,7 @@ class GraphSlam:
                 initial=tuple(seed),
                 tree=last.tree,
                 max_distance=self.cfg.refine_max_distance,
+                trim=self.cfg.trim,
             )
             if self.cfg.field_refine_unconverged and not retry.converged:
                 alt = self._field_refine(last, points, seed)
@@ -369,7 +380,12 @@ class GraphSlam:
             field.fine, tuple(field.origin), field.resolution, points, seed, iterations=20
         )[0]
         return plicp_at(
-            node.points, points, pose, max_distance=self.cfg.refine_max_distance, tree=node.tree
+            node.points,
+            points,
+            pose,
+            max_distance=self.cfg.refine_max_distance,
+            trim=self.cfg.trim,
+            tree=node.tree,
         )
 
     def _score(self, node: Node, points: np.ndarray, res) -> float:
@@ -465,21 +481,32 @@ class GraphSlam:
             self._xy[list(changed)] = [self.nodes[k].pose[:2] for k in changed]
 
     def _loop_candidates(self, k: int) -> list[int]:
-        """Older nodes (index gap ≥ ``loop_index_gap``) within ``loop_radius`` of node k; with
+        """Older nodes (index gap > ``loop_index_gap``) within ``loop_radius`` of node k; with
         ``loop_per_chain``, only the nearest of each run of consecutive such nodes (one pass
         of the vessel), at most ``loop_max_chains`` of them, nearest first."""
-        old = np.arange(max(0, k - self.cfg.loop_index_gap))
+        return self._near(
+            k,
+            self.cfg.loop_index_gap,
+            self.cfg.loop_radius,
+            self.cfg.loop_max_chains if self.cfg.loop_per_chain else None,
+        )
+
+    def _near(self, k: int, gap: int, radius: float, chains: int | None) -> list[int]:
+        """Nodes whose index is more than ``gap`` below k within ``radius`` [m] of node k; with
+        ``chains``, only the nearest of each run of consecutive such nodes (one pass of the
+        vessel), at most ``chains`` of them, nearest first."""
+        old = np.arange(max(0, k - gap))
         if not len(old):
             return []
         self._sync_xy()
         d = np.hypot(*(self._xy[old] - self.nodes[k].pose[:2]).T)
-        near = old[d <= self.cfg.loop_radius]
-        if not self.cfg.loop_per_chain or not len(near):
+        near = old[d <= radius]
+        if chains is None or not len(near):
             return list(near)
         runs = np.split(near, np.flatnonzero(np.diff(near) > 1) + 1)
         best = [int(run[np.argmin(d[run])]) for run in runs]
         best.sort(key=lambda i: d[i])
-        return best[: self.cfg.loop_max_chains]
+        return best[:chains]
 
     def _submap(self, k: int, indices) -> np.ndarray:
         """The scans of the nodes ``indices`` (those that exist) in node k's frame."""
@@ -552,6 +579,77 @@ class GraphSlam:
             Constraint(i, k, z, self._covariance(reference, b.points, res), robust, kind)
         )
         return True
+
+    def relink(self, progress: bool = False) -> int:
+        """Link every node to the older nodes within ``relink_radius`` (index gap ≥ 2, at most
+        ``relink_max_links`` of them, evenly spread over their indices) by PLICP from the
+        graph's current relative pose,
+        and optimise the whole graph (after merging a full optimisation still running). The
+        final estimate is already consistent to a few centimetres where the tracking and the
+        loops reach; the links then tie every pass to its neighbours several metres away, which
+        the chain of ~1 m steps and the few 4 m loops constrain only through their noise. A
+        match is kept if it converges within ``relink_max_correction`` [m] of the current
+        relative pose, with ``min_link_points`` pairs, an RMS residual within
+        ``max_link_residual`` and a likelihood score of at least ``min_loop_score``; it joins
+        as a loop, so GNC may reject it. ``progress``: a progress bar over the nodes matched
+        against. Returns the links added."""
+        self.finish_full()
+        if self.cfg.relink_radius <= 0 or len(self.nodes) < 3:
+            return 0
+        t0 = time.perf_counter()
+        linked = {(c.i, c.j) for c in self.constraints}
+        pairs: dict[int, list[int]] = {}  # reference node -> the nodes matched to it
+        for k in range(2, len(self.nodes)):
+            near = self._near(k, 1, self.cfg.relink_radius, None)
+            most = self.cfg.relink_max_links
+            if 0 < most < len(near):  # evenly over the older nodes' indices: every pass keeps some
+                near = [
+                    near[j]
+                    for j in np.unique(np.linspace(0, len(near) - 1, most).round().astype(int))
+                ]
+            for i in near:
+                if (i, k) not in linked:
+                    pairs.setdefault(i, []).append(k)
+        added = 0
+        last = self.nodes[-1]
+        order = sorted(pairs)
+        if progress:
+            from tqdm import tqdm
+
+            order = tqdm(order, unit="node", desc="relink")
+        for i in order:
+            a = self.nodes[i]
+            for k in pairs[i]:
+                b = self.nodes[k]
+                guess = between(a.pose, b.pose)
+                res = plicp(
+                    a.points,
+                    b.points,
+                    initial=tuple(guess),
+                    tree=a.tree,
+                    max_distance=self.cfg.refine_max_distance,
+                    trim=self.cfg.trim,
+                )
+                z = np.array([res.t[0], res.t[1], res.theta])
+                if not (
+                    res.converged
+                    and res.n_valid >= self.cfg.min_link_points
+                    and res.residual <= self.cfg.max_link_residual
+                    and np.hypot(*(z[:2] - guess[:2])) <= self.cfg.relink_max_correction
+                    and a.field(self.cfg).score(b.points, z) >= self.cfg.min_loop_score
+                ):
+                    continue
+                cov = self._tracking_covariance(a, b.points, res)
+                self.constraints.append(Constraint(i, k, z, cov, False, "loop"))
+                added += 1
+            if a is not last:  # one field at a time (megabytes each); tracking keeps the last's
+                a._field = None
+        self.stats["relinks"] = added
+        if added:
+            self.full_pending = True
+            self.optimise_pending()
+        self.stats["relink_ms"] = (time.perf_counter() - t0) * 1e3
+        return added
 
     # --- optimisation ---------------------------------------------------------------------------
     # --- the scan-SLAM backend protocol of ``LidarSlam2D`` ------------------------------------

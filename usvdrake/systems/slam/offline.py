@@ -202,6 +202,7 @@ def run_graph_slam(
         stamps.append(rec.timestamp)
         anchors.append((max(len(slam.nodes) - 1, 0), slam._rel.copy()))
     slam.optimise_pending()
+    slam.relink(progress)  # (cfg.relink_radius > 0) the final estimate relinked, re-optimised
     poses = np.array(
         [compose(slam.nodes[i].pose, rel) if slam.nodes else rel for i, rel in anchors]
     )
@@ -239,6 +240,7 @@ def run_slam2d(
     full_period: float = FULL_PERIOD,
     full_in_worker: bool | None = None,
     full_budget_ms_per_node: float = FULL_BUDGET_MS_PER_NODE,
+    relink_radius: float | None = None,
 ) -> dict:
     """Run the graph SLAM on a CARMEN log, a ROS bag or a mission log; write trajectory.tum,
     map.png, metrics.json. ``garbage``: the fraction of scans replaced by garbage first
@@ -247,7 +249,9 @@ def run_slam2d(
     :data:`STREAM_CONFIG` for bags and mission logs. ``full_period``: log time [s] between the
     full-graph optimisations loops ask for (:func:`run_graph_slam`); ``full_in_worker``: solve
     them in the worker process (True) or here (False) instead of as ``config`` says;
-    ``full_budget_ms_per_node``: the worker's time per node (:func:`run_graph_slam`)."""
+    ``full_budget_ms_per_node``: the worker's time per node (:func:`run_graph_slam`);
+    ``relink_radius`` [m]: relink the final estimate (:meth:`GraphSlam.relink`) instead of as
+    ``config`` says."""
     from usvdrake.analysis.trajectory_metrics import ate, trajectory_from_planar, write_tum
     from usvdrake.logs.rosbag import is_bag, read_bag_scans
     from usvdrake.typed_yaml import ConfigError
@@ -286,6 +290,10 @@ def run_slam2d(
     )
     if full_in_worker is not None:
         cfg = replace(cfg, full_in_worker=full_in_worker)
+    if relink_radius is not None:
+        if not relink_radius >= 0.0:
+            raise ValueError(f"run_slam2d: relink_radius must be >= 0 m, got {relink_radius}")
+        cfg = replace(cfg, relink_radius=relink_radius)
     wall0 = time.perf_counter()
     stamps, poses, slam = run_graph_slam(scans, cfg, progress, full_period, full_budget_ms_per_node)
     wall = time.perf_counter() - wall0
@@ -311,6 +319,10 @@ def run_slam2d(
         "slam_constraints": len(slam.constraints),
         "slam_loops": int(slam.stats["loops"]),
         "rejected_loops": int(slam.stats.get("rejected_loops", 0)),
+        # links of the final estimate's passes (GraphSlamConfig.relink_radius) and [s] of wall
+        # time they and their optimisation took after the last scan (in wall_time_s)
+        "relinks": int(slam.stats.get("relinks", 0)),
+        "relink_s": float(slam.stats.get("relink_ms", 0.0) / 1e3),
         "tracking_ms_median": float(np.median(track)),
         "tracking_ms_p95": float(np.percentile(track, 95)),
         "full_optimisations": len(slam.stats["full_optimisation_ms"]),
