@@ -686,3 +686,13 @@ def test_relinking_the_final_estimate_pulls_a_drifted_chain_back():
     err = np.hypot(*(after[:, :2] - truth[:, :2]).T)
     assert err.max() < 0.3 * drift.max()
     assert slam.stats["relink_ms"] > 0
+    # relink_max_links: at most that many older nodes per node, the oldest and the newest of
+    # those in reach among them (spread over their indices)
+    capped, _ = _drifted_chain(replace(cfg, relink_radius=5.0, relink_max_links=2))
+    capped.relink()
+    per_node = {}
+    for c in capped.constraints:
+        if c.kind == "loop":
+            per_node.setdefault(c.j, []).append(c.i)
+    assert per_node and all(len(v) <= 2 for v in per_node.values())
+    assert sorted(per_node[7]) == [3, 5]  # 3..5 within 5 m of its drifted pose (6: consecutive)

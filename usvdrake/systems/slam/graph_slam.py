@@ -119,6 +119,10 @@ class GraphSlamConfig:
     loop_min_sigma: list[float] = field(default_factory=lambda: [0.03, 0.03, 0.01])
     loop_per_chain: bool = False  # match one node per pass near the new node, not every one
     loop_max_chains: int = 8  # [-] passes matched per new node, nearest first
+    loop_angular_window: float = 0.5  # [rad]
+    loop_distinct: float = 0.5  # [m] a runner-up pose this far from the best is a rival
+    max_loop_ambiguity: float = 0.9  # [-] rival score / best score above which a loop is refused
+    min_loop_score: float = 0.5  # [-] mean likelihood of the loop scan's points, in [0, 1]
     # [m] > 0: after the last scan (GraphSlam.relink, offline), every node is matched by PLICP
     # from the final estimate to the older nodes within this radius (index gap ≥ 2; at most
     # relink_max_links of them, spread over their indices; 0: all), a match moving less than
@@ -128,10 +132,6 @@ class GraphSlamConfig:
     relink_radius: float = 0.0
     relink_max_links: int = 0
     relink_max_correction: float = 0.3
-    loop_angular_window: float = 0.5  # [rad]
-    loop_distinct: float = 0.5  # [m] a runner-up pose this far from the best is a rival
-    max_loop_ambiguity: float = 0.9  # [-] rival score / best score above which a loop is refused
-    min_loop_score: float = 0.5  # [-] mean likelihood of the loop scan's points, in [0, 1]
     alpha: float = 0.0  # Barron α of the robustified constraints (0: Cauchy)
     c: float = 1.0  # Barron scale c (in units of the whitened error)
     range_sigma: float = 0.02  # [m] range noise for the Censi covariance
@@ -583,8 +583,8 @@ class GraphSlam:
     def relink(self, progress: bool = False) -> int:
         """Link every node to the older nodes within ``relink_radius`` (index gap ≥ 2, at most
         ``relink_max_links`` of them, evenly spread over their indices) by PLICP from the
-        graph's current relative pose,
-        and optimise the whole graph (after merging a full optimisation still running). The
+        graph's current relative pose, and optimise the whole graph (after merging a full
+        optimisation still running). The
         final estimate is already consistent to a few centimetres where the tracking and the
         loops reach; the links then tie every pass to its neighbours several metres away, which
         the chain of ~1 m steps and the few 4 m loops constrain only through their noise. A
