@@ -584,7 +584,7 @@ class GraphSlam:
         """Link every node to the older nodes within ``relink_radius`` (index gap ≥ 2, at most
         ``relink_max_links`` of them, evenly spread over their indices) by PLICP from the
         graph's current relative pose, and optimise the whole graph (after merging a full
-        optimisation still running). The
+        optimisation still running; with ``relink_radius`` 0 nothing happens). The
         final estimate is already consistent to a few centimetres where the tracking and the
         loops reach; the links then tie every pass to its neighbours several metres away, which
         the chain of ~1 m steps and the few 4 m loops constrain only through their noise. A
@@ -593,10 +593,10 @@ class GraphSlam:
         ``max_link_residual`` and a likelihood score of at least ``min_loop_score``; it joins
         as a loop, so GNC may reject it. ``progress``: a progress bar over the nodes matched
         against. Returns the links added."""
-        self.finish_full()
         if self.cfg.relink_radius <= 0 or len(self.nodes) < 3:
             return 0
         t0 = time.perf_counter()
+        self.finish_full()  # the links are matched from the latest estimate
         linked = {(c.i, c.j) for c in self.constraints}
         pairs: dict[int, list[int]] = {}  # reference node -> the nodes matched to it
         for k in range(2, len(self.nodes)):
