@@ -32,6 +32,8 @@ def test_slam2d_cli_runs_a_real_log_piece(tmp_path):
     assert (tmp_path / "map.png").stat().st_size > 1000
     # scored against the log's own (odometry) poses: the robot barely moves in these 200 scans
     assert metrics["ate_m"] < 0.5
+    assert metrics["ate_m"] <= metrics["ate_max_m"]
+    assert (tmp_path / "ate.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     # played back at its pace (Intel's scans ~0.2 s apart) every scan's lag is at least its
     # own processing time (> 0) and at most the whole run's wall time
     assert 0.0 < metrics["lag_p95_s"] <= metrics["lag_max_s"] <= metrics["wall_time_s"]
@@ -93,6 +95,7 @@ def test_slam2d_relink_links_the_final_estimate_and_refuses_a_negative_radius(tm
     the radius and the graph optimised again; the links and their time are in the metrics (the
     time inside the wall time); a negative radius is a one-line error."""
     out = tmp_path / "relinked"
+    assert not (out / "ate.png").exists()  # no reference, no error plot
     assert main(["slam2d", str(LOG), "--out", str(out), "--quiet", "--relink", "3"]) == 0
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["slam_nodes"] >= 3 and metrics["relinks"] >= 1

@@ -91,6 +91,25 @@ def test_planar_ate_with_se2_alignment():
     assert r["ate_scale"] == pytest.approx(0.5)
 
 
+def test_ate_errors_locate_a_bent_stretch_and_plot_it(tmp_path):
+    """Pose by pose: a moved copy whose poses 50-59 are pushed 1 m sideways shows its error
+    there and nowhere else much (the alignment shares it out), the RMSE is ``ate``'s; the
+    plot is a PNG and refuses errors that do not fit the poses."""
+    rng = np.random.default_rng(7)
+    p = _planar(rng)
+    t = np.arange(len(p)) * 0.1
+    moved = tm.se3_to_planar(tm.planar_to_se3([[3.0, 1.0, 0.5]]) @ tm.planar_to_se3(p))
+    moved[50:60, 1] += 1.0
+    aligned, ref, e, s = tm.ate_errors((t, moved), (t, p), align="se2")
+    assert s == 1.0 and len(e) == len(p) == len(aligned.t) == len(ref.t)
+    assert e[50:60].min() > 0.8 and np.delete(e, range(50, 60)).max() < 0.2
+    assert np.sqrt(np.mean(e**2)) == pytest.approx(tm.ate((t, moved), (t, p))["ate_rmse_m"])
+    png = tm.plot_ate(aligned, ref, e, tmp_path / "ate.png", title="bent")
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    with pytest.raises(ValueError, match="200 estimated and 200 reference poses, 3 errors"):
+        tm.plot_ate(aligned, ref, e[:3], tmp_path / "bad.png")
+
+
 def test_rpe_of_a_rigidly_moved_copy_is_zero():
     rng = np.random.default_rng(6)
     ref = _random_trajectory(rng)

@@ -485,7 +485,8 @@ def cmd_slam2d(args) -> int:
             if isinstance(value, float)
             else f"  {key:<{width}} {value}"
         )
-    print(f"  trajectory.tum, map.png, metrics.json in {args.out}")
+    files = "trajectory.tum, map.png, metrics.json" + (", ate.png" if args.reference else "")
+    print(f"  {files} in {args.out}")
     return 0
 
 

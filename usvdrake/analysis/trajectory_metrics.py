@@ -301,14 +301,24 @@ def align_trajectory(
 # --- metrics ---------------------------------------------------------------------------------
 
 
-def ate(est, ref, align: str = "se2", with_scale: bool = False, max_dt: float = 0.02) -> dict:
-    """Absolute trajectory error (Sturm et al. 2012, §VI-B): ‖trans(Q_i⁻¹ S P_i)‖ [m] after
-    associating ``est`` with ``ref`` by timestamp (within max_dt [s]) and aligning with S
-    (:func:`align_trajectory`). est, ref: anything :func:`as_trajectory` accepts. Returns RMSE,
-    mean, median, standard deviation and maximum [m], the number of pairs and the scale."""
+def ate_errors(
+    est, ref, align: str = "se2", with_scale: bool = False, max_dt: float = 0.02
+) -> tuple[Trajectory, Trajectory, np.ndarray, float]:
+    """The pose-by-pose absolute trajectory error (Sturm et al. 2012, §VI-B): ‖trans(Q_i⁻¹ S
+    P_i)‖ [m] after associating ``est`` with ``ref`` by timestamp (within max_dt [s]) and
+    aligning with S (:func:`align_trajectory`). est, ref: anything :func:`as_trajectory`
+    accepts. Returns (the associated estimate aligned, the associated reference, the errors
+    [m], the scale)."""
     est, ref = _associated(est, ref, max_dt)
     aligned, _, _, s = align_trajectory(est, ref, align, with_scale)
     e = np.linalg.norm(aligned.poses[:, :3, 3] - ref.poses[:, :3, 3], axis=1)
+    return aligned, ref, e, s
+
+
+def ate(est, ref, align: str = "se2", with_scale: bool = False, max_dt: float = 0.02) -> dict:
+    """Absolute trajectory error (Sturm et al. 2012, §VI-B; :func:`ate_errors`). Returns RMSE,
+    mean, median, standard deviation and maximum [m], the number of pairs and the scale."""
+    _, _, e, s = ate_errors(est, ref, align, with_scale, max_dt)
     return {
         "ate_rmse_m": float(np.sqrt(np.mean(e**2))),
         "ate_mean_m": float(np.mean(e)),
@@ -318,6 +328,51 @@ def ate(est, ref, align: str = "se2", with_scale: bool = False, max_dt: float = 
         "ate_pairs": len(e),
         "ate_scale": s,
     }
+
+
+def plot_ate(
+    aligned, ref, errors: np.ndarray, path: str | Path, title: str = "", index_label: str = "pose"
+) -> Path:
+    """PNG of where an estimate's absolute trajectory error lies (:func:`ate_errors`' output):
+    left, the reference path in x-y (grey) with the aligned estimate's positions coloured by
+    their error and a line from each to its reference position; right, the error pose by pose
+    (``index_label`` names the axis) with its RMSE. Returns ``path``. Drawn on a bare
+    :class:`~matplotlib.figure.Figure`: the caller's pyplot backend is left alone."""
+    from matplotlib.collections import LineCollection
+    from matplotlib.figure import Figure
+
+    aligned, ref = as_trajectory(aligned), as_trajectory(ref)
+    e = np.asarray(errors, float)
+    pe, pr = aligned.poses[:, :2, 3], ref.poses[:, :2, 3]
+    if not len(e) == len(pe) == len(pr):
+        raise ValueError(
+            f"plot_ate: {len(pe)} estimated and {len(pr)} reference poses, {len(e)} errors"
+        )
+    rmse = float(np.sqrt(np.mean(e**2))) if len(e) else float("nan")
+    fig = Figure(figsize=(13, 5.5))
+    ax_xy, ax_e = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.2, 1]})
+    ax_xy.plot(pr[:, 0], pr[:, 1], color="0.6", lw=2, label="reference", zorder=1)
+    ax_xy.add_collection(
+        LineCollection(np.stack([pe, pr], axis=1), colors="0.3", linewidths=0.5, zorder=2)
+    )
+    dots = ax_xy.scatter(pe[:, 0], pe[:, 1], c=e, s=7, cmap="viridis", zorder=3, label="estimate")
+    fig.colorbar(dots, ax=ax_xy, label="error [m]")
+    ax_xy.set(xlabel="x [m]", ylabel="y [m]", title="estimate aligned to the reference")
+    ax_xy.set_aspect("equal", adjustable="datalim")
+    ax_xy.legend(loc="best", fontsize=8)
+    ax_e.plot(np.arange(len(e)), e, lw=0.8, color="C0")
+    ax_e.axhline(rmse, color="C3", ls="--", lw=1, label=f"RMSE {rmse:.3f} m")
+    ax_e.set(xlabel=index_label, ylabel="error [m]", title="absolute trajectory error")
+    ax_e.set_ylim(bottom=0.0)
+    ax_e.legend(loc="upper right", fontsize=8)
+    for ax in (ax_xy, ax_e):
+        ax.grid(alpha=0.3)
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    return path
 
 
 def rpe_pairs(

@@ -246,8 +246,10 @@ def run_slam2d(
     relink_radius: float | None = None,
 ) -> dict:
     """Run the graph SLAM on a CARMEN log, a ROS bag or a mission log; write trajectory.tum,
-    map.png, metrics.json. ``garbage``: the fraction of scans replaced by garbage first
-    (:func:`corrupt_scans`, seeded by ``seed``), to test robustness. ``config``: the SLAM's
+    map.png, metrics.json and, scored against a ``reference``, ate.png (where the error lies:
+    :func:`~usvdrake.analysis.trajectory_metrics.plot_ate`). ``garbage``: the fraction of
+    scans replaced by garbage first (:func:`corrupt_scans`, seeded by ``seed``), to test
+    robustness. ``config``: the SLAM's
     (its map fields are set here); by default :data:`LOG_CONFIG` for CARMEN logs and
     :data:`STREAM_CONFIG` for bags and mission logs. ``full_period``: log time [s] between the
     full-graph optimisations loops ask for (:func:`run_graph_slam`); ``full_in_worker``: solve
@@ -255,7 +257,12 @@ def run_slam2d(
     ``full_budget_ms_per_node``: the worker's time per node (:func:`run_graph_slam`);
     ``relink_radius`` [m]: relink the final estimate (:meth:`GraphSlam.relink`) instead of as
     ``config`` says."""
-    from usvdrake.analysis.trajectory_metrics import ate, trajectory_from_planar, write_tum
+    from usvdrake.analysis.trajectory_metrics import (
+        ate_errors,
+        plot_ate,
+        trajectory_from_planar,
+        write_tum,
+    )
     from usvdrake.logs.rosbag import is_bag, read_bag_scans
     from usvdrake.typed_yaml import ConfigError
 
@@ -348,15 +355,25 @@ def run_slam2d(
         metrics["lag_p95_s"] = float(np.percentile(lag, 95))
     if reference is not None:
         t_est, p_est, t_ref, p_ref, how = _reference_pairs(clean, stamps, poses, reference)
-        result = ate(
+        aligned, matched, errors, _ = ate_errors(
             trajectory_from_planar(t_est, p_est),
             trajectory_from_planar(t_ref, p_ref),
             align="se2",
             max_dt=0.05,
         )
-        metrics["ate_m"] = result["ate_rmse_m"]
-        metrics["ate_pairs"] = result["ate_pairs"]
+        metrics["ate_m"] = float(np.sqrt(np.mean(errors**2)))
+        metrics["ate_max_m"] = float(errors.max())
+        metrics["ate_pairs"] = len(errors)
         metrics["ate_association"] = how
+        # where the error lies: a person would rather look than read 400 numbers
+        plot_ate(
+            aligned,
+            matched,
+            errors,
+            out / "ate.png",
+            title=f"{log.name} against {Path(reference).name}",
+            index_label="reference scan" if how == "scan" else "pose",
+        )
     (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
     return metrics
 
