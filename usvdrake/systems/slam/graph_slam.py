@@ -122,6 +122,12 @@ class GraphSlamConfig:
     loop_angular_window: float = 0.5  # [rad]
     loop_distinct: float = 0.5  # [m] a runner-up pose this far from the best is a rival
     max_loop_ambiguity: float = 0.9  # [-] rival score / best score above which a loop is refused
+    # [m] > 0: a searched loop's pose is searched again for the new node's scan alone, within
+    # this window (and ± loop_rematch_angle [rad]) of the pose the recent scans found: those sit
+    # where tracking put them relative to the new node, and one wrong step there moves the
+    # whole query with it (ours; 0: the recent scans' pose is refined as it is)
+    loop_rematch_window: float = 0.0
+    loop_rematch_angle: float = 0.1
     min_loop_score: float = 0.5  # [-] mean likelihood of the loop scan's points, in [0, 1]
     # [m] > 0: after the last scan (GraphSlam.relink, offline), every node is matched by PLICP
     # from the final estimate to the older nodes within this radius (index gap ≥ 2; at most
@@ -526,13 +532,14 @@ class GraphSlam:
         if search and self.cfg.loop_linear_window > 0:
             h = self.cfg.loop_submap
             submap = self._submap(i, range(i - h, i + h + 1))
+            candidate = LikelihoodField.build(
+                submap,
+                self.cfg.search_resolution,
+                self.cfg.search_sigma,
+                margin=self.cfg.loop_linear_window + 1.0,
+            )
             match = correlative_match(
-                LikelihoodField.build(
-                    submap,
-                    self.cfg.search_resolution,
-                    self.cfg.search_sigma,
-                    margin=self.cfg.loop_linear_window + 1.0,
-                ),
+                candidate,
                 self._submap(k, range(k - h, k + 1)),
                 guess,
                 self.cfg.loop_linear_window,
@@ -549,6 +556,14 @@ class GraphSlam:
             ):
                 self.stats["failed_matches"] += 1
                 return False
+            if self.cfg.loop_rematch_window > 0:
+                guess = correlative_match(
+                    candidate,
+                    b.points,
+                    guess,
+                    self.cfg.loop_rematch_window,
+                    self.cfg.loop_rematch_angle,
+                ).pose
             rotation_search, pairing, searched = False, self.cfg.refine_max_distance, True
             if self.cfg.loop_refine_submap:
                 # the new scan refined against the candidate's whole submap (each of its scans
