@@ -319,6 +319,12 @@ def ate(est, ref, align: str = "se2", with_scale: bool = False, max_dt: float = 
     """Absolute trajectory error (Sturm et al. 2012, §VI-B; :func:`ate_errors`). Returns RMSE,
     mean, median, standard deviation and maximum [m], the number of pairs and the scale."""
     _, _, e, s = ate_errors(est, ref, align, with_scale, max_dt)
+    return ate_summary(e, s)
+
+
+def ate_summary(e: np.ndarray, s: float = 1.0) -> dict:
+    """:func:`ate`'s numbers from :func:`ate_errors`' errors ``e`` [m] and scale ``s``."""
+    e = np.asarray(e, float)
     return {
         "ate_rmse_m": float(np.sqrt(np.mean(e**2))),
         "ate_mean_m": float(np.mean(e)),

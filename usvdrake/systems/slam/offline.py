@@ -254,9 +254,9 @@ def run_slam2d(
     map.png, metrics.json and, scored against a ``reference``, ate.png (where the error lies:
     :func:`~usvdrake.analysis.trajectory_metrics.plot_ate`). ``garbage``: the fraction of
     scans replaced by garbage first (:func:`corrupt_scans`, seeded by ``seed``), to test
-    robustness. ``config``: the SLAM's
-    (its map fields are set here); by default :data:`LOG_CONFIG` for CARMEN logs and
-    :data:`STREAM_CONFIG` for bags and mission logs. ``full_period``: log time [s] between the
+    robustness. ``config``: the SLAM's (its map fields are set here); by default
+    :data:`LOG_CONFIG` for CARMEN logs and :data:`STREAM_CONFIG` for bags and mission logs.
+    ``full_period``: log time [s] between the
     full-graph optimisations loops ask for (:func:`run_graph_slam`); ``full_in_worker``: solve
     them in the worker process (True) or here (False) instead of as ``config`` says;
     ``full_budget_ms_per_node``: the worker's time per node (:func:`run_graph_slam`);
@@ -264,6 +264,7 @@ def run_slam2d(
     ``config`` says."""
     from usvdrake.analysis.trajectory_metrics import (
         ate_errors,
+        ate_summary,
         plot_ate,
         trajectory_from_planar,
         write_tum,
@@ -366,9 +367,10 @@ def run_slam2d(
             align="se2",
             max_dt=0.05,
         )
-        metrics["ate_m"] = float(np.sqrt(np.mean(errors**2)))
-        metrics["ate_max_m"] = float(errors.max())
-        metrics["ate_pairs"] = len(errors)
+        summary = ate_summary(errors)
+        metrics["ate_m"] = summary["ate_rmse_m"]
+        metrics["ate_max_m"] = summary["ate_max_m"]
+        metrics["ate_pairs"] = summary["ate_pairs"]
         metrics["ate_association"] = how
         # where the error lies: a person would rather look than read 400 numbers
         plot_ate(
