@@ -344,7 +344,7 @@ class GraphSlam:
             rel = guess
         else:
             self._fail_streak = 0
-            rel = np.array([res.t[0], res.t[1], res.theta])
+            rel = res.pose
         self._last_step = between(self._rel, rel)
         self._last_dt = t - self._last_t if self._last_t is not None else 0.0
         self._last_t = t
@@ -397,7 +397,7 @@ class GraphSlam:
     def _score(self, node: Node, points: np.ndarray, res) -> float:
         """Likelihood score of ``points`` at a match result in ``node``'s field, less the
         sideways-motion penalty (``lateral_weight``) of the step from the previous scan."""
-        pose = (res.t[0], res.t[1], res.theta)
+        pose = res.pose
         penalty = self.cfg.lateral_weight * lateral_motion(self._rel, pose) ** 2
         return node.field(self.cfg).score(points, pose) - penalty
 
@@ -427,7 +427,7 @@ class GraphSlam:
         ``min_sigma`` floor."""
         if self.cfg.landscape_temperature <= 0:
             return self._covariance(node.points, points, res)
-        pose = (res.t[0], res.t[1], res.theta)
+        pose = res.pose
         field = node.field(self.cfg)
         spread = match_covariance(field, points, pose, self.cfg.landscape_temperature)
         return spread + self._floor
@@ -587,7 +587,7 @@ class GraphSlam:
         if not (settled and res.n_valid >= need and res.residual <= limit):
             self.stats["failed_matches"] += 1
             return False
-        z = np.array([res.t[0], res.t[1], res.theta])
+        z = res.pose
         # (against a submap, Censi's covariance takes every reference point's range noise along
         # its bearing from node i, though its neighbours' points were ranged from elsewhere)
         self.constraints.append(
@@ -645,7 +645,7 @@ class GraphSlam:
                     max_distance=self.cfg.refine_max_distance,
                     trim=self.cfg.trim,
                 )
-                z = np.array([res.t[0], res.t[1], res.theta])
+                z = res.pose
                 if not (
                     res.converged
                     and res.n_valid >= self.cfg.min_link_points

@@ -43,6 +43,11 @@ class PlicpResult:
     residual: float  # [m] RMS point-to-line error of those correspondences
     correspondences: np.ndarray  # (n_valid, 3) int: current index i, reference a_i, b_i
 
+    @property
+    def pose(self) -> np.ndarray:
+        """(x, y, θ) of the current scan's frame in the reference frame."""
+        return np.array([self.t[0], self.t[1], self.theta])
+
 
 def rot(theta: float) -> np.ndarray:
     c, s = np.cos(theta), np.sin(theta)
