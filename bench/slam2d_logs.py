@@ -88,6 +88,9 @@ def main() -> None:
                 "ate_pairs": m["ate_pairs"],
                 "ate_m": m["ate_m"],
                 "reached": m["ate_m"] <= TARGET_ATE,
+                # > 1: the estimate came out smaller than the reference (run_slam2d)
+                "ate_scale": m["ate_scale"],
+                "ate_sim2_m": m["ate_sim2_m"],
                 "scans": m["scans"],
                 "slam_nodes": m["slam_nodes"],
                 "slam_loops": m["slam_loops"],

@@ -88,6 +88,14 @@ def test_slam2d_scores_a_raw_log_against_its_corrected_log_scan_by_scan(tmp_path
     expected = ate(trajectory_from_planar(k, est), trajectory_from_planar(k, poses), align="se2")
     assert metrics["ate_m"] == pytest.approx(expected["ate_rmse_m"], rel=1e-6)
     assert metrics["ate_m"] > 0.05  # the drift the corrected poses carry is seen
+    # the poses drift 1 cm a scan along x: the similarity fit reads a scale, and takes out
+    # what the scale explains
+    similar = ate(
+        trajectory_from_planar(k, est), trajectory_from_planar(k, poses), "se2", with_scale=True
+    )
+    assert metrics["ate_scale"] == pytest.approx(similar["ate_scale"], rel=1e-9)
+    assert metrics["ate_sim2_m"] == pytest.approx(similar["ate_rmse_m"], rel=1e-6)
+    assert metrics["ate_sim2_m"] <= metrics["ate_m"]
 
 
 def test_slam2d_relink_links_the_final_estimate_and_refuses_a_negative_radius(tmp_path, capsys):
