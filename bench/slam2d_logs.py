@@ -17,6 +17,7 @@ them (``full_wait_s``); and ``reached`` per log.
 ``--raw``: run on the raw logs instead (``intel.clf.bz2`` … beside the ``corrected`` folder:
 every scan the robot recorded, with its own clock), the command the issue names, scored against
 the same corrected poses, scan by scan (:func:`usvdrake.logs.carmen.associate_scans`).
+``--raw --odometry``: with the raw logs' wheel odometry as well (not scan-only).
 """
 
 import argparse
@@ -61,7 +62,14 @@ def main() -> None:
         metavar="RADIUS",
         help="relink each final estimate within RADIUS [m] (GraphSlam.relink; default off)",
     )
+    parser.add_argument(
+        "--odometry",
+        action="store_true",
+        help="with the raw logs' wheel odometry (needs --raw; not the issue's scan-only score)",
+    )
     args = parser.parse_args()
+    if args.odometry and not args.raw:
+        parser.error("--odometry needs --raw: a corrected log's pose fields are its reference")
     data = Path(args.data)
     if not data.is_dir():
         raise SystemExit(f"slam2d_logs: no directory {data} (pass --data)")
@@ -82,6 +90,7 @@ def main() -> None:
                 progress=False,
                 full_budget_ms_per_node=args.full_budget,
                 relink_radius=args.relink,
+                odometry=args.odometry,
             )
             results[name] = {
                 "log": log.name,
@@ -118,6 +127,7 @@ def main() -> None:
                 "raw": args.raw,
                 "full_budget_ms_per_node": args.full_budget,
                 "relink_radius_m": args.relink,
+                "odometry": args.odometry,
                 "target_ate_m": TARGET_ATE,
                 "logs": results,
             },

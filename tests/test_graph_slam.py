@@ -9,7 +9,13 @@ from scipy.spatial import cKDTree
 
 from usvdrake.sensors.lidar_model import LidarConfig, LidarModel, preset_by_name
 from usvdrake.sensors.raycast import cast
-from usvdrake.systems.slam.graph_slam import GraphSlam, GraphSlamConfig, between, compose
+from usvdrake.systems.slam.graph_slam import (
+    GraphSlam,
+    GraphSlamConfig,
+    between,
+    compose,
+    odometry_covariance,
+)
 from usvdrake.worlds import box, cylinder
 from usvdrake.worlds.synthetic import HOKUYO, cluttered_room
 from usvdrake.worlds.world import World
@@ -739,3 +745,144 @@ def test_a_loop_is_searched_again_for_the_new_scan_alone():
         errors[window] = (np.hypot(*(z[:2] - true_z[:2])), abs(z[2] - true_z[2]))
     assert errors[0.0][0] > 0.2  # the query's wrong scan carried the loop off (or lost it)
     assert errors[0.6][0] < 0.02 and errors[0.6][1] < np.deg2rad(0.5)
+
+
+# A 2 m wide, 200 m long corridor seen within 4 m: its walls say nothing about the motion along it.
+CORRIDOR = World(
+    "corridor",
+    0,
+    solids=[box("wall", 0, 1.5, 200, 1, 0, -1, 2), box("wall", 0, -1.5, 200, 1, 0, -1, 2)],
+).scene
+
+
+def _drive(scene, poses, odometry=None, cfg=None, max_range=4.0):
+    """Scan ``scene`` from each pose (Hokuyo beams) and track the scans; the final estimate."""
+    slam = GraphSlam(
+        cfg or GraphSlamConfig(map_size=[40.0, 20.0], map_origin=[-20.0, -10.0]), poses[0]
+    )
+    a = HOKUYO.azimuths
+    for k, p in enumerate(poses):
+        r = cast(scene, HOKUYO, [0.0], np.array(p[:2]), 1.0, p[2], max_range)[0]
+        v = np.isfinite(r)
+        pts = np.column_stack([r[v] * np.cos(a[v]), r[v] * np.sin(a[v])])
+        est = slam.process(pts, r, a, 0.1 * k, None if odometry is None else odometry[k])
+    slam.optimise(full=True)
+    return slam, est
+
+
+def test_odometry_covariance_is_a_random_walk_in_distance_and_turn():
+    cov = odometry_covariance(np.array([3.0, 4.0, -0.5]), (0.1, 0.2, 0.03))
+    np.testing.assert_allclose(
+        np.diag(cov), [0.01 * 5 + 1e-6, 0.01 * 5 + 1e-6, 0.04 * 0.5 + 0.0009 * 5 + 1e-6]
+    )
+    # additive: two half steps along a line carry the variance of the whole step
+    half = odometry_covariance(np.array([0.5, 0.0, 0.0]), (0.1, 0.2, 0.03))
+    whole = odometry_covariance(np.array([1.0, 0.0, 0.0]), (0.1, 0.2, 0.03))
+    np.testing.assert_allclose(2 * half - 1e-6 * np.eye(3), whole, rtol=1e-12, atol=1e-15)
+    assert np.all(np.linalg.eigvalsh(odometry_covariance(np.zeros(3), (0, 0, 0))) > 0)
+    with pytest.raises(ValueError, match="sigma"):
+        odometry_covariance(np.zeros(3), (0.1, -1.0, 0.0))
+
+
+@pytest.mark.parametrize("seed", [False, True])
+def test_odometry_measures_the_corridor_the_scans_cannot(seed: bool):
+    """Driving 10 m down a featureless corridor at 0.25 m a scan, starting from rest: scan-only
+    tracking from the constant-velocity guess (nothing, at the start) cannot see the motion:
+    its matches fail or slide, and it comes out metres short. With the odometry (3 % long, as
+    wheels slip; nothing here to calibrate it by) seeding the matches and tying the nodes it
+    comes out within the odometry's error, whether it seeds the matches or only ties the nodes
+    (``odometry_seed``)."""
+    poses = [np.array([0.25 * k - 5.0, 0.0, 0.0]) for k in range(41)]
+    scan_only = _drive(CORRIDOR, poses)[1]
+    assert poses[-1][0] - scan_only[0] > 2.0  # lost: 10 m driven
+    odometry = [np.array([1.03 * 0.25 * k, 0.0, 0.0]) for k in range(41)]
+    cfg = GraphSlamConfig(map_size=[40.0, 20.0], map_origin=[-20.0, -10.0], odometry_seed=seed)
+    slam, est = _drive(CORRIDOR, poses, odometry, cfg)
+    assert abs(est[0] - poses[-1][0]) < 0.05 * 10.0
+    assert abs(est[1]) < 0.05 and abs(est[2]) < 0.01  # the walls still hold it sideways
+    # tied by odometry once it went a metre (GraphSlamConfig.odometry_span), not every node
+    spans = [np.hypot(*c.z[:2]) for c in slam.constraints if c.kind == "odometry"]
+    assert min(spans) >= 1.0 and sum(spans) > 0.8 * 10.3
+
+
+def test_where_the_scans_measure_the_motion_they_outweigh_biased_odometry():
+    """In the cluttered room the same 3 % long odometry barely moves the estimate: PLICP's
+    matches there are good to millimetres, the odometry's steps only to centimetres."""
+    poses = [np.array([0.1 * k - 1.0, 0.02 * k, 0.01 * k]) for k in range(21)]
+    odometry = [np.array([1.03 * 0.1 * k, 1.03 * 0.02 * k, 0.01 * k]) for k in range(21)]
+    cfg = GraphSlamConfig(node_translation=0.15, map_size=[20.0, 20.0], map_origin=[-10.0, -10.0])
+    est = _drive(ROOM, poses, odometry, cfg, max_range=30.0)[1]
+    assert np.hypot(*(est[:2] - poses[-1][:2])) < 0.01
+    assert abs(est[2] - poses[-1][2]) < np.deg2rad(0.2)
+
+
+def test_odometry_must_be_a_planar_pose():
+    slam = GraphSlam(GraphSlamConfig(map_size=[20.0, 20.0], map_origin=[-10.0, -10.0]))
+    pts = np.column_stack([np.linspace(1, 5, 50), np.ones(50)])
+    with pytest.raises(ValueError, match="odometry"):
+        slam.process(pts, np.hypot(*pts.T), np.arctan2(pts[:, 1], pts[:, 0]), 0.0, [1.0, 2.0])
+
+
+def test_the_scans_calibrate_the_odometry_where_they_measure_the_motion():
+    """Around a 2.5 m circle in the cluttered room with odometry 10 % long in distance and 5 %
+    short in turn: the scans measure every step there, so the odometry's scale comes out as
+    their ratio, and the odometry constraints carry the corrected steps."""
+    a = np.linspace(0.0, 2 * np.pi, 131)
+    poses = [np.array([1 + 2.5 * np.cos(t), 2.5 * np.sin(t), t + np.pi / 2]) for t in a]
+    odometry = [np.zeros(3)]
+    for p, q in zip(poses[:-1], poses[1:], strict=True):
+        step = between(p, q)
+        odometry.append(compose(odometry[-1], step * [1.1, 1.1, 0.95]))
+    cfg = GraphSlamConfig(node_translation=0.15, map_size=[30.0, 20.0], map_origin=[-15.0, -10.0])
+    slam = _drive(ROOM, poses, odometry, cfg, max_range=30.0)[0]
+    k_d, k_r = slam.odometry_scale
+    assert abs(k_d - 1 / 1.1) < 0.01 and abs(k_r - 1 / 0.95) < 0.01
+    est = {k: n.pose for k, n in enumerate(slam.nodes)}
+    late = [c for c in slam.constraints if c.kind == "odometry"][-5:]
+    assert len(late) == 5
+    for c in late:  # after calibration the odometry's step agrees with the scans' own
+        assert np.hypot(*(c.z[:2] - between(est[c.i], est[c.j])[:2])) < 0.02
+    off = GraphSlam(replace(cfg, odometry_calibrate=False))
+    assert off.odometry_scale == (1.0, 1.0)
+
+
+def test_lidar_slam_system_takes_odometry_on_its_optional_port():
+    """``LidarSlam2D``'s ``odometry`` port: unconnected, the SLAM is scan-only; fed the
+    vessel's dead-reckoned pose, the lidar's pose by odometry (through the mount) reaches the
+    graph, whose nodes it ties once it has gone a metre."""
+    from pydrake.systems.analysis import Simulator
+
+    from usvdrake.sensors.messages import LaserScan
+    from usvdrake.systems.slam.hector import HectorConfig
+    from usvdrake.systems.slam.lidar_slam2d import HectorSlam, LidarSlam2D
+
+    cfg = GraphSlamConfig(map_size=[30.0, 20.0], map_origin=[-15.0, -10.0])
+    mount = [0.5, 0.0, 0.0, 0.0]  # the lidar 0.5 m ahead
+    kinds = {}
+    for connected in (False, True):
+        system = LidarSlam2D(cfg, (0.0, 0.0, 0.0), mount, period=0.1)
+        sim = Simulator(system)
+        ctx = sim.get_mutable_context()
+        for k in range(30):  # 0.1 m a scan along x, turning 0.01 rad a scan
+            body = np.array([0.1 * k, 0.0, 0.01 * k])
+            lidar = compose(body, np.array([0.5, 0.0, 0.0]))
+            r = cast(ROOM, HOKUYO, [0.0], lidar[:2], 1.0, lidar[2], 30.0)[0]
+            scan = LaserScan(
+                time=0.1 * k + 1e-3,
+                angle_min=HOKUYO.azimuths[0],
+                angle_increment=HOKUYO.azimuths[1] - HOKUYO.azimuths[0],
+                range_max=30.0,
+                ranges=np.where(np.isfinite(r), r, np.inf),
+                valid=np.isfinite(r),
+            )
+            system.GetInputPort("lidar_scan").FixValue(ctx, scan)
+            if connected:
+                # in the odometry's own frame: the map's moved and turned
+                system.GetInputPort("odometry").FixValue(ctx, compose(np.array([5, -2, 0.3]), body))
+            sim.AdvanceTo(0.1 * k + 0.05)
+        slam = system.slam(ctx)
+        kinds[connected] = [c.kind for c in slam.constraints]
+        pose = system.GetOutputPort("slam_pose").Eval(ctx)
+        np.testing.assert_allclose(pose, [2.9, 0.0, 0.29], atol=0.02)
+    assert "odometry" not in kinds[False] and kinds[True].count("odometry") >= 2
+    assert not HectorSlam(HectorConfig(), (0, 0, 0), mount, 0.1).HasInputPort("odometry")

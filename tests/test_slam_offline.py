@@ -114,6 +114,29 @@ def test_slam2d_relink_links_the_final_estimate_and_refuses_a_negative_radius(tm
     assert "--relink" in capsys.readouterr().err
 
 
+def test_slam2d_odometry_ties_the_nodes_by_the_logs_wheel_odometry(tmp_path, capsys):
+    """``--odometry``: the raw log's odometry (its FLASER pose fields) ties the nodes (every
+    metre it went) beside the scans; the metrics say so and give the calibration the scans
+    made of it (1 until the odometry has gone 5 m over well-measured steps). The scan-only run
+    has none of those constraints; a bag has no odometry to read: a one-line error."""
+    plain, odo = tmp_path / "plain", tmp_path / "odo"
+    assert main(["slam2d", str(LOG), "--out", str(plain), "--quiet"]) == 0
+    assert main(["slam2d", str(LOG), "--out", str(odo), "--quiet", "--odometry"]) == 0
+    without = json.loads((plain / "metrics.json").read_text())
+    metrics = json.loads((odo / "metrics.json").read_text())
+    assert without["odometry"] is False and without["odometry_scale"] is None
+    assert metrics["odometry"] is True and len(metrics["odometry_scale"]) == 2
+    assert all(0.5 < k < 2.0 for k in metrics["odometry_scale"])
+    assert metrics["slam_nodes"] == without["slam_nodes"]  # the scans alone make the nodes
+    assert metrics["slam_constraints"] > without["slam_constraints"]
+    t, xyz, _ = read_tum(odo / "trajectory.tum")
+    assert len(t) == 200 and np.all(np.isfinite(xyz))
+    bag = tmp_path / "room.bag"
+    write_bag(bag)
+    assert main(["slam2d", str(bag), "--out", str(tmp_path / "b"), "--quiet", "--odometry"]) == 2
+    assert "CARMEN" in capsys.readouterr().err
+
+
 def test_slam2d_missing_log_is_one_line(tmp_path, capsys):
     assert main(["slam2d", str(tmp_path / "nope.clf"), "--out", str(tmp_path)]) == 2
     assert "no such file" in capsys.readouterr().err

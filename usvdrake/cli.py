@@ -332,7 +332,9 @@ def make_parser() -> argparse.ArgumentParser:
     d.add_argument("--trials", type=int, default=5)
     d.add_argument("--duration", type=float, default=150.0, help="nominal trial length [s]")
     d.set_defaults(func=cmd_identify_data)
-    m = sub.add_parser("slam2d", help="2D graph SLAM (002) on recorded scans, scan only")
+    m = sub.add_parser(
+        "slam2d", help="2D graph SLAM (002) on recorded scans (scan only unless --odometry)"
+    )
     m.add_argument(
         "log", help="CARMEN .clf/.log (plain, gzip or bzip2), ROS 1 .bag or ROS 2 bag folder"
     )
@@ -379,6 +381,12 @@ def make_parser() -> argparse.ArgumentParser:
         metavar="RADIUS",
         help="after the last scan, link every node to the older ones within RADIUS [m] by PLICP "
         "from the final estimate and optimise again (slow: all pairs; default off)",
+    )
+    m.add_argument(
+        "--odometry",
+        action="store_true",
+        help="use a raw CARMEN log's wheel odometry as well (seeds and constraints; not "
+        "scan-only; a corrected log's pose fields are its reference, not odometry)",
     )
     m.add_argument("--quiet", action="store_true", help="no progress bar")
     m.set_defaults(func=cmd_slam2d)
@@ -475,6 +483,7 @@ def cmd_slam2d(args) -> int:
         seed=args.seed,
         full_in_worker=not args.inline,
         relink_radius=args.relink,
+        odometry=args.odometry,
         **({} if args.full_period is None else {"full_period": args.full_period}),
         **({} if args.full_budget is None else {"full_budget_ms_per_node": args.full_budget}),
     )

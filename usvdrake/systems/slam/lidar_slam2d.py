@@ -20,6 +20,7 @@ class LidarSlam2D(LeafSystem):
         name: LidarSlam2D
         input_ports:
         - lidar_scan
+        - odometry (optional)
         output_ports:
         - slam_pose
         - slam_covariance
@@ -35,6 +36,11 @@ class LidarSlam2D(LeafSystem):
     started however fast the machine is (a solve still running then is waited for), so a
     simulation stays deterministic.
 
+    ``odometry`` (graph backend only; leave it unconnected for scan-only SLAM, as 002): the
+    vessel's [x y ψ] by dead reckoning (wheel odometry, a DVL's integrated velocity) in its own
+    frame; its steps, calibrated by the scans, tie the graph's nodes where the scans cannot
+    measure the motion (``GraphSlamConfig.odometry_sigma``).
+
     A backend offers ``process_scan(scan)``, ``sensor_pose``, ``pose_covariance()``,
     ``occupancy()`` and ``background()``: :class:`GraphSlam` (here) or the Hector mapper
     (:class:`HectorSlam`).
@@ -44,8 +50,11 @@ class LidarSlam2D(LeafSystem):
         super().__init__()
         self._mount = np.array([mount[0], mount[1], mount[3]], float)  # x, y, yaw of the lidar
         sensor0 = compose(np.asarray(initial_pose, float), self._mount)
-        backend = backend(sensor0) if backend is not None else GraphSlam(cfg, sensor0)
+        graph = backend is None
+        backend = GraphSlam(cfg, sensor0) if graph else backend(sensor0)
         self._scan = self.DeclareAbstractInputPort("lidar_scan", AbstractValue.Make(LaserScan()))
+        # (GraphSlam only: the Hector backend has no odometry, Kohlbrecher 2011)
+        self._odometry = self.DeclareVectorInputPort("odometry", 3) if graph else None
         self._slam = self.DeclareAbstractState(AbstractValue.Make(backend))
         self._last = self.DeclareDiscreteState(BasicVector([-1.0]))
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
@@ -77,7 +86,13 @@ class LidarSlam2D(LeafSystem):
             or scan.valid.sum() < 10
         ):
             return  # already seen, or the sensor's empty message before its first sweep
-        state.get_mutable_abstract_state(self._slam).get_value().process_scan(scan)
+        slam = state.get_mutable_abstract_state(self._slam).get_value()
+        if self._odometry is not None and self._odometry.HasValue(context):
+            # the lidar's pose by odometry: the backend's poses are the lidar's
+            odometry = compose(np.asarray(self._odometry.Eval(context), float), self._mount)
+            slam.process_scan(scan, odometry=odometry)
+        else:
+            slam.process_scan(scan)
         state.get_mutable_discrete_state(self._last).SetAtIndex(0, scan.time)
 
     def _background(self, context, state):

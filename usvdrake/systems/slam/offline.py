@@ -1,6 +1,7 @@
 """Offline 2D SLAM on recorded scans (``usvdrake slam2d``): CARMEN logs and ROS 1/2 bags.
 
-Scan-only (no odometry, as 002's system runs): every scan goes through :class:`GraphSlam`; the
+Scan-only by default (no odometry, as 002's system runs; ``odometry=True`` adds a raw CARMEN
+log's wheel odometry, calibrated by the scans): every scan goes through :class:`GraphSlam`; the
 output trajectory is every scan's pose re-expressed from its node after the last optimisation,
 stamped with the log's own timestamps. With a reference trajectory (e.g. a "corrected" log) the
 ATE is computed after an SE(2) alignment (Sturm et al. 2012).
@@ -163,8 +164,10 @@ def run_graph_slam(
     progress: bool = False,
     full_period: float = FULL_PERIOD,
     full_budget_ms_per_node: float = FULL_BUDGET_MS_PER_NODE,
+    odometry: bool = False,
 ):
-    """(timestamps, poses (n × 3), slam) for a sequence of CarmenScan-like records.
+    """(timestamps, poses (n × 3), slam) for a sequence of CarmenScan-like records;
+    ``odometry``: with each record's ``odometry_pose`` (:meth:`GraphSlam.process`).
 
     The full-graph optimisation a loop closure asks for starts at most once per
     ``full_period`` [s] of the log's time (0, or stamps that do not advance: at any scan), as
@@ -197,7 +200,10 @@ def run_graph_slam(
     steps = slam.stats.setdefault("offline_step_ms", [])
     for rec in iterator:
         t0 = time.perf_counter()
-        slam.process_scan(replace(rec.scan, time=rec.timestamp))
+        slam.process_scan(
+            replace(rec.scan, time=rec.timestamp),
+            odometry=rec.odometry_pose if odometry else None,
+        )
         now = max(now, rec.timestamp)  # (corrected CARMEN logs' stamps may step back)
         if now >= due:
             slam.finish_full()
@@ -249,6 +255,7 @@ def run_slam2d(
     full_in_worker: bool | None = None,
     full_budget_ms_per_node: float = FULL_BUDGET_MS_PER_NODE,
     relink_radius: float | None = None,
+    odometry: bool = False,
 ) -> dict:
     """Run the graph SLAM on a CARMEN log, a ROS bag or a mission log; write trajectory.tum,
     map.png, metrics.json and, scored against a ``reference``, ate.png (where the error lies:
@@ -261,7 +268,9 @@ def run_slam2d(
     them in the worker process (True) or here (False) instead of as ``config`` says;
     ``full_budget_ms_per_node``: the worker's time per node (:func:`run_graph_slam`);
     ``relink_radius`` [m]: relink the final estimate (:meth:`GraphSlam.relink`) instead of as
-    ``config`` says."""
+    ``config`` says. ``odometry``: use a raw CARMEN log's wheel odometry (the laser's pose
+    fields of its FLASER lines; :meth:`GraphSlam.process`) — not a scan-only run, and
+    meaningless on a "corrected" log, whose pose fields are the reference itself."""
     from usvdrake.analysis.trajectory_metrics import (
         ate_errors,
         ate_summary,
@@ -281,12 +290,16 @@ def run_slam2d(
     elif is_bag(log):
         scans = list(read_bag_scans(log))
     elif log.is_file():
-        scans = list(read_carmen(log))
+        # the laser's pose fields: the odometry's pose of the laser itself (in fr079 0.04 m ahead
+        # of the robot's odom fields), which only --odometry reads
+        scans = list(read_carmen(log, pose="laser"))
         base = LOG_CONFIG
     else:
         raise ConfigError(
             log, "", "a CARMEN log, a ROS 1/2 bag or a usvdrake .mcap", "no such file"
         )
+    if odometry and base is not LOG_CONFIG:
+        raise ConfigError(log, "", "a CARMEN log (odometry is read from those only)", "not one")
     if max_scans:
         scans = scans[:max_scans]
     if not scans:
@@ -311,7 +324,9 @@ def run_slam2d(
             raise ValueError(f"run_slam2d: relink_radius must be >= 0 m, got {relink_radius}")
         cfg = replace(cfg, relink_radius=relink_radius)
     wall0 = time.perf_counter()
-    stamps, poses, slam = run_graph_slam(scans, cfg, progress, full_period, full_budget_ms_per_node)
+    stamps, poses, slam = run_graph_slam(
+        scans, cfg, progress, full_period, full_budget_ms_per_node, odometry
+    )
     wall = time.perf_counter() - wall0
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -331,6 +346,9 @@ def run_slam2d(
         "log": str(log),
         "scans": len(scans),
         "garbage_scans": len(corrupted),
+        "odometry": odometry,  # False: scan-only
+        # (distance, turn) factors the scans calibrated the odometry by (GraphSlam.odometry_scale)
+        "odometry_scale": list(slam.odometry_scale) if odometry else None,
         "slam_nodes": len(slam.nodes),
         "slam_constraints": len(slam.constraints),
         "slam_loops": int(slam.stats["loops"]),
