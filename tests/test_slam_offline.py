@@ -129,6 +129,10 @@ def test_slam2d_odometry_ties_the_nodes_by_the_logs_wheel_odometry(tmp_path, cap
     assert all(0.5 < k < 2.0 for k in metrics["odometry_scale"])
     assert metrics["slam_nodes"] == without["slam_nodes"]  # the scans alone make the nodes
     assert metrics["slam_constraints"] > without["slam_constraints"]
+    # every odometry constraint was either added or gated out (odometry_gate), none counted twice
+    added = metrics["slam_constraints"] - without["slam_constraints"]
+    assert metrics["odometry_constraints"] == added > 0 and without["odometry_constraints"] == 0
+    assert metrics["odometry_rejected"] >= 0
     t, xyz, _ = read_tum(odo / "trajectory.tum")
     assert len(t) == 200 and np.all(np.isfinite(xyz))
     bag = tmp_path / "room.bag"

@@ -385,7 +385,8 @@ def make_parser() -> argparse.ArgumentParser:
     m.add_argument(
         "--odometry",
         action="store_true",
-        help="use a raw CARMEN log's wheel odometry as well (seeds and constraints; not "
+        help="use a raw CARMEN log's wheel odometry as well: a constraint every metre, "
+        "scaled by what the scans measured, left out where it contradicts them (not "
         "scan-only; a corrected log's pose fields are its reference, not odometry)",
     )
     m.add_argument("--quiet", action="store_true", help="no progress bar")

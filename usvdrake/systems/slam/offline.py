@@ -349,6 +349,9 @@ def run_slam2d(
         "odometry": odometry,  # False: scan-only
         # (distance, turn) factors the scans calibrated the odometry by (GraphSlam.odometry_scale)
         "odometry_scale": list(slam.odometry_scale) if odometry else None,
+        # odometry constraints added, and left out for disagreeing with the scans (odometry_gate)
+        "odometry_constraints": int(slam.stats["odometry_constraints"]),
+        "odometry_rejected": int(slam.stats["odometry_rejected"]),
         "slam_nodes": len(slam.nodes),
         "slam_constraints": len(slam.constraints),
         "slam_loops": int(slam.stats["loops"]),
