@@ -100,6 +100,10 @@ def main() -> None:
                 # > 1: the estimate came out smaller than the reference (run_slam2d)
                 "ate_scale": m["ate_scale"],
                 "ate_sim2_m": m["ate_sim2_m"],
+                # --odometry: its calibration by the scans, constraints added / gated out
+                "odometry_scale": m["odometry_scale"],
+                "odometry_constraints": m["odometry_constraints"],
+                "odometry_rejected": m["odometry_rejected"],
                 "scans": m["scans"],
                 "slam_nodes": m["slam_nodes"],
                 "slam_loops": m["slam_loops"],
