@@ -39,7 +39,8 @@ class LidarSlam2D(LeafSystem):
     ``odometry`` (graph backend only; leave it unconnected for scan-only SLAM, as 002): the
     vessel's [x y ψ] by dead reckoning (wheel odometry, a DVL's integrated velocity) in its own
     frame; its steps, calibrated by the scans, tie the graph's nodes where the scans cannot
-    measure the motion (``GraphSlamConfig.odometry_sigma``).
+    measure the motion (``GraphSlamConfig.odometry_sigma``), and are left out where they
+    contradict the scans (``odometry_gate``).
 
     A backend offers ``process_scan(scan)``, ``sensor_pose``, ``pose_covariance()``,
     ``occupancy()`` and ``background()``: :class:`GraphSlam` (here) or the Hector mapper
