@@ -300,7 +300,7 @@ def test_ate_agrees_with_evo(ref_and_est):
         stats = ape.get_all_statistics()
         ours = tm.ate(est, ref, align="se3", with_scale=with_scale)
         for key in ("rmse", "mean", "median", "std", "max"):
-            assert ours[f"ate_{key}_m"] == pytest.approx(stats[key], abs=1e-6)
+            assert ours[f"ate_{key}_m"] == pytest.approx(stats[key], abs=1e-12)
 
 
 @pytest.mark.parametrize(
@@ -328,7 +328,7 @@ def test_rpe_agrees_with_evo(ref_and_est, delta, unit):
         stats = m.get_all_statistics()
         assert len(m.error) == ours["rpe_pairs"]
         for stat in ("rmse", "mean", "max"):
-            assert ours[key.format(stat)] == pytest.approx(stats[stat], abs=1e-6)
+            assert ours[key.format(stat)] == pytest.approx(stats[stat], abs=1e-12)
 
 
 def test_planar_se2_ate_agrees_with_evo_se3():
