@@ -757,7 +757,8 @@ CORRIDOR = World(
 
 
 def _drive(scene, poses, odometry=None, cfg=None, max_range=4.0):
-    """Scan ``scene`` from each pose (Hokuyo beams) and track the scans; the final estimate."""
+    """Scan ``scene`` from each pose (Hokuyo beams) and track the scans; (the SLAM after a
+    full optimisation, the pose tracking returned for the last scan)."""
     slam = GraphSlam(
         cfg or GraphSlamConfig(map_size=[40.0, 20.0], map_origin=[-20.0, -10.0]), poses[0]
     )
