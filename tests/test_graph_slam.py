@@ -807,7 +807,6 @@ def test_odometry_measures_the_corridor_the_scans_cannot(seed: bool):
     assert min(spans) >= 1.0 and sum(spans) > 0.8 * 10.3
     # the scans' chain is long along the corridor: the gate lets the odometry in
     assert slam.stats["odometry_rejected"] == 0
-    assert slam.stats["odometry_constraints"] == len(spans)
 
 
 def test_compose_covariance_is_the_first_order_propagation():
@@ -838,8 +837,9 @@ def test_odometry_that_contradicts_the_scans_is_gated_out():
         odometry[k] = np.array([3.0 - 0.1 * k, 0.0, 0.0])
     cfg = GraphSlamConfig(node_translation=0.15, map_size=[20.0, 20.0], map_origin=[-10.0, -10.0])
     slam, est = _drive(ROOM, poses, odometry, cfg, max_range=30.0)
-    assert slam.stats["odometry_rejected"] >= 1 and slam.stats["odometry_constraints"] >= 1
-    for c in (c for c in slam.constraints if c.kind == "odometry"):
+    kept = [c for c in slam.constraints if c.kind == "odometry"]
+    assert slam.stats["odometry_rejected"] >= 1 and len(kept) >= 1
+    for c in kept:
         assert c.z[0] > 0  # only forward spans: the backward ones were gated out
     assert np.hypot(*(est[:2] - poses[-1][:2])) < 0.01
 

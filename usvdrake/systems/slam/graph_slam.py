@@ -330,8 +330,7 @@ class GraphSlam:
             "full_wait_ms": [],  # the scans' waits for a full optimisation still solving
             "loops": 0,
             "failed_matches": 0,
-            "odometry_constraints": 0,
-            "odometry_rejected": 0,  # left out by odometry_gate
+            "odometry_rejected": 0,  # odometry constraints left out by odometry_gate
         }
         self.full_pending = False
         self._full_job = None  # (job, problem, node count) of the running full optimisation
@@ -355,9 +354,8 @@ class GraphSlam:
         a tracking match."""
         t0 = time.perf_counter()
         odometry_step = self._odometry_step(odometry)
-        if odometry_step is not None:  # in the scans' measure (odometry_scale)
-            k_d, k_r = self.odometry_scale
-            odometry_step = odometry_step * (k_d, k_d, k_r)
+        if odometry_step is not None:
+            odometry_step = self._calibrated(odometry_step)
         motion = self._last_step if odometry_step is None else odometry_step
         if len(points) < self.cfg.min_link_points:
             # too few returns to match (blinded, NaN): coast on the odometry or the constant
@@ -597,6 +595,11 @@ class GraphSlam:
             return 1.0, 1.0
         return (d_scan / d_odo if d_odo >= 5.0 else 1.0, r_scan / r_odo if r_odo >= 3.0 else 1.0)
 
+    def _calibrated(self, step: np.ndarray) -> np.ndarray:
+        """An odometry step (dx, dy, dθ) in the scans' measure (:attr:`odometry_scale`)."""
+        k_d, k_r = self.odometry_scale
+        return step * (k_d, k_d, k_r)
+
     def _calibrate_odometry(self, prev: int, k: int, rel: np.ndarray, cov: np.ndarray) -> None:
         """Add the node step ``rel`` (covariance ``cov``) to the odometry's calibration sums
         where the scans measured it: translation when its σ along the motion is within
@@ -611,18 +614,15 @@ class GraphSlam:
         d = float(np.hypot(step[0], step[1]))
         # the scans' step projected on the odometry's direction, their turn signed by its: a
         # norm of a noisy step is biased long (by σ²/2d: 2 % for 1 cm on Intel's 5 cm steps)
+        add = np.zeros(4)
         if d > 1e-3:
             u = step[:2] / d
             if u @ cov[:2, :2] @ u <= self.cfg.odometry_calibration_sigma**2:
-                # new arrays, not +=: copies of this object (__deepcopy__) share the old one
-                self._odometry_sums = self._odometry_sums + (u @ rel[:2], d, 0.0, 0.0)
+                add[:2] = (u @ rel[:2], d)
         if cov[2, 2] <= np.deg2rad(1.0) ** 2:
-            self._odometry_sums = self._odometry_sums + (
-                0.0,
-                0.0,
-                np.sign(step[2]) * rel[2],
-                abs(step[2]),
-            )
+            add[2:] = (np.sign(step[2]) * rel[2], abs(step[2]))
+        # a new array, not +=: copies of this object (__deepcopy__) share the old one
+        self._odometry_sums = self._odometry_sums + add
 
     def _odometry_constraint(self, prev: int, k: int, rel: np.ndarray, cov: np.ndarray) -> None:
         """Tie the new node ``k`` (its scans' step ``rel`` from node ``prev``, covariance
@@ -639,14 +639,12 @@ class GraphSlam:
             return
         step = between(there, here)
         if np.hypot(step[0], step[1]) >= self.cfg.odometry_span or abs(step[2]) >= 1.0:
-            k_d, k_r = self.odometry_scale
-            step = np.array([k_d * step[0], k_d * step[1], k_r * step[2]])
+            step = self._calibrated(step)
             step_cov = odometry_covariance(step, self.cfg.odometry_sigma)
             e = step - chain[0]
             e[2] = np.angle(np.exp(1j * e[2]))
             if e @ np.linalg.solve(chain[1] + step_cov, e) <= self.cfg.odometry_gate:
                 self.constraints.append(Constraint(start, k, step, step_cov, True, "odometry"))
-                self.stats["odometry_constraints"] += 1
             else:
                 self.stats["odometry_rejected"] += 1
             start, chain = k, None

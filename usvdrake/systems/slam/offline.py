@@ -350,7 +350,7 @@ def run_slam2d(
         # (distance, turn) factors the scans calibrated the odometry by (GraphSlam.odometry_scale)
         "odometry_scale": list(slam.odometry_scale) if odometry else None,
         # odometry constraints added, and left out for disagreeing with the scans (odometry_gate)
-        "odometry_constraints": int(slam.stats["odometry_constraints"]),
+        "odometry_constraints": sum(c.kind == "odometry" for c in slam.constraints),
         "odometry_rejected": int(slam.stats["odometry_rejected"]),
         "slam_nodes": len(slam.nodes),
         "slam_constraints": len(slam.constraints),
