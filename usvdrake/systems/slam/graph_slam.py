@@ -630,13 +630,13 @@ class GraphSlam:
         ``odometry_span`` since (or turned 1 rad), unless it fails ``odometry_gate`` against
         the scans' steps over the span; a node without odometry ends the span."""
         start = prev if self._odometry_from is None else self._odometry_from
-        zero = (np.zeros(3), np.zeros((3, 3)))
-        chain = compose_covariance(*(self._odometry_chain or zero), rel, cov)
         here, there = self.nodes[k].odometry, self.nodes[start].odometry
         if here is None or there is None:
             self._odometry_from = None if here is None else k
             self._odometry_chain = None
             return
+        zero = (np.zeros(3), np.zeros((3, 3)))
+        chain = compose_covariance(*(self._odometry_chain or zero), rel, cov)
         step = between(there, here)
         if np.hypot(step[0], step[1]) >= self.cfg.odometry_span or abs(step[2]) >= 1.0:
             step = self._calibrated(step)
