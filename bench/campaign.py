@@ -1,4 +1,4 @@
-"""Benchmark: a Monte Carlo campaign (usvdrake.campaign) on 1 and on 2 Dask workers.
+"""Benchmark: a Monte Carlo campaign (usvdrake.run.campaign) on 1 and on 2 Dask workers.
 
 The same campaign — river_tracking (000 §VI-B: NMPC + NMHE on the Charles River), 16
 randomised runs of 60 simulated seconds, campaign seed 0 — once on a ``LocalCluster`` of one
@@ -23,8 +23,8 @@ import json
 import os
 import statistics
 
-from usvdrake.campaign import is_timing_key, run_campaign
-from usvdrake.scenario import load_scenario
+from usvdrake.run.campaign import is_timing_key, run_campaign
+from usvdrake.diagrams import load_scenario
 
 TARGET_RATIO = 0.6
 

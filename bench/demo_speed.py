@@ -12,7 +12,7 @@ import statistics
 import time
 
 from usvdrake import load_scenario, run_mission
-from usvdrake.mission import make_meshcat
+from usvdrake.run.mission import make_meshcat
 
 TARGET = 20.0
 

@@ -1,7 +1,7 @@
 """Benchmark: scan-only 2D graph SLAM on the "corrected" CARMEN building logs (issue 6).
 
-Runs ``usvdrake slam2d``'s offline runner (:func:`usvdrake.systems.slam.offline.run_slam2d`,
-:data:`~usvdrake.systems.slam.offline.LOG_CONFIG`, no odometry) on each corrected log found in
+Runs ``usvdrake slam2d``'s offline runner (:func:`usvdrake.run.slam2d.run_slam2d`,
+:data:`~usvdrake.run.slam2d.LOG_CONFIG`, no odometry) on each corrected log found in
 ``--data`` (default ``../shared/data/carmen/corrected``: Intel, MIT-CSAIL, Freiburg 079 and
 ACES, subsampled scans with SLAM-corrected poses) and scores it by ATE against the log's own
 poses after an SE(2) alignment. Prints one JSON object: per log ``ate_m`` (target ≤ 0.10),
@@ -25,7 +25,7 @@ import json
 import tempfile
 from pathlib import Path
 
-from usvdrake.systems.slam.offline import FULL_BUDGET_MS_PER_NODE, run_slam2d
+from usvdrake.run.slam2d import FULL_BUDGET_MS_PER_NODE, run_slam2d
 
 LOGS = ("intel", "csail", "freiburg-079", "aces")
 RAW = {  # the raw log of each corrected one

@@ -2,7 +2,7 @@
 
 Records ``--duration`` s of ``valley_survey`` (USV2000 + Hokuyo at 40 Hz around the valley lake)
 or takes an existing mission log (``--log``), then runs ``usvdrake slam2d``'s offline runner
-(:func:`usvdrake.systems.slam.offline.run_slam2d`, scan only) twice on its scans: clean, and
+(:func:`usvdrake.run.slam2d.run_slam2d`, scan only) twice on its scans: clean, and
 with ``--garbage`` of them replaced (:func:`corrupt_scans`: random ranges, half-empty, NaN in
 turn), both scored by ATE against the log's ground truth. Prints one JSON object:
 ``ate_clean_m``, ``ate_garbage_m``, ``ate_ratio`` (target ≤ 1.5) and the runs' counts.
@@ -13,8 +13,8 @@ import json
 import tempfile
 from pathlib import Path
 
-from usvdrake.scenario import load_scenario, with_overrides
-from usvdrake.systems.slam.offline import run_slam2d
+from usvdrake.diagrams import load_scenario, with_overrides
+from usvdrake.run.slam2d import run_slam2d
 
 
 def main() -> None:
@@ -27,7 +27,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         log = Path(args.log) if args.log else None
         if log is None:
-            from usvdrake.mission import run_mission
+            from usvdrake.run.mission import run_mission
 
             scenario = with_overrides(load_scenario("valley_survey"), duration=args.duration)
             run_mission(scenario, out_dir=tmp, record=False)

@@ -3,7 +3,7 @@
 Records ``--duration`` s of the ``canal_survey`` scenario (VLP-16 at 10 Hz, IMU at 50 Hz, GPS at
 5 Hz, along Amsterdam's inner ring), or takes an existing mission log (``--log``), and replays
 it offline through :class:`usvdrake.systems.slam.lidar_inertial.LidarInertialSlam` with the
-scenario's configuration (:func:`usvdrake.slam3d.run_slam3d`, the same order of messages as the
+scenario's configuration (:func:`usvdrake.run.slam3d.run_slam3d`, the same order of messages as the
 live ``FactorGraphSlam``). Per keyframe: de-skew + feature extraction + scan-to-submap
 registration + iSAM2 update(s) with the GPS factor — the issue's definition; the loop search
 (000 §V-C, LIO-SAM's separate thread) is timed on its own (``loop_ms_*``) and with the rest
@@ -22,8 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from usvdrake.scenario import load_scenario, with_overrides
-from usvdrake.slam3d import run_slam3d, settings_from_scenario
+from usvdrake.diagrams import load_scenario, with_overrides
+from usvdrake.run.slam3d import run_slam3d, settings_from_scenario
 
 
 def main() -> None:
@@ -36,7 +36,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         log = Path(args.log) if args.log else None
         if log is None:
-            from usvdrake.mission import run_mission
+            from usvdrake.run.mission import run_mission
 
             run_mission(scenario, out_dir=tmp, record=False)
             log = Path(tmp) / "log.mcap"

@@ -1,4 +1,4 @@
-"""Monte Carlo campaigns (usvdrake.campaign): randomisation, Dask runs, failures, reproducibility,
+"""Monte Carlo campaigns (usvdrake.run.campaign): randomisation, Dask runs, failures, reproducibility,
 and the plant-only model error behind them."""
 
 import dataclasses
@@ -8,9 +8,9 @@ import os
 import numpy as np
 import pytest
 
-import usvdrake.campaign as campaign_mod
-import usvdrake.mission
-from usvdrake.campaign import (
+import usvdrake.run.campaign as campaign_mod
+import usvdrake.run.mission
+from usvdrake.run.campaign import (
     RANGES,
     _dask_client,
     draw_summary,
@@ -20,8 +20,8 @@ from usvdrake.campaign import (
 )
 from usvdrake.cli import main
 from usvdrake.diagrams.vessel_diagram import build_vessel_diagram
-from usvdrake.mission import run_mission
-from usvdrake.scenario import load_scenario, validate_scenario, with_overrides
+from usvdrake.run.mission import run_mission
+from usvdrake.diagrams import check_scenario, load_scenario, with_overrides
 from usvdrake.typed_yaml import ConfigError
 from usvdrake.vessel import load_vessel
 from usvdrake.worlds import make_world
@@ -113,7 +113,7 @@ def test_failed_runs_are_recorded_not_fatal(monkeypatch, tmp_path):
     (An in-process cluster via ``scheduler=`` so that the monkeypatches reach the worker.)"""
     from dask.distributed import LocalCluster
 
-    real_run, real_randomise = usvdrake.mission.run_mission, campaign_mod.randomise
+    real_run, real_randomise = usvdrake.run.mission.run_mission, campaign_mod.randomise
     calls = []
 
     def flaky_run(scenario, **kw):
@@ -127,7 +127,7 @@ def test_failed_runs_are_recorded_not_fatal(monkeypatch, tmp_path):
             raise ConfigError("test", "initial_state", "free water", "land")
         return real_randomise(scenario, rng, ranges)
 
-    monkeypatch.setattr(usvdrake.mission, "run_mission", flaky_run)
+    monkeypatch.setattr(usvdrake.run.mission, "run_mission", flaky_run)
     monkeypatch.setattr(campaign_mod, "randomise", flaky_randomise)
     with LocalCluster(
         n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None
@@ -181,7 +181,7 @@ def test_model_error_changes_the_plant_not_the_autonomy():
 def test_model_error_is_validated(bad):
     s = dataclasses.replace(load_scenario("ntnu_round_open_water"), model_error=bad)
     with pytest.raises(ConfigError, match="key 'model_error': expected 6 positive") as e:
-        validate_scenario(s)
+        check_scenario(s)
     assert "\n" not in str(e.value)
 
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from usvdrake.sensors.raycast import cast
+from usvdrake.worlds.raycast import cast
 from usvdrake.systems.slam.correlative import (
     LikelihoodField,
     correlative_match,

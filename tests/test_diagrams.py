@@ -59,7 +59,7 @@ def test_vessel_diagram_structure_reads_like_the_picture():
 
 
 def test_hardware_station_has_the_sim_station_ports_and_the_same_autonomy():
-    from hardware_io.pty_link import PtyDevice
+    from hardware_io.emulators.pty_link import PtyDevice
     from usvdrake.diagrams.hardware_station import close_hardware
 
     s = load_scenario("river_tracking")

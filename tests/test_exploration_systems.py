@@ -10,7 +10,9 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource
 
-from usvdrake.scenario import ConfigError, load_scenario, validate_scenario
+from usvdrake.diagrams import check_scenario, load_scenario
+
+from usvdrake.scenario import ConfigError
 from usvdrake.sensors.messages import LaserScan
 from usvdrake.systems.guidance.astar_planner import AStarPlanner
 from usvdrake.systems.guidance.frontier_explorer import ExplorerConfig, FrontierExplorer
@@ -180,7 +182,7 @@ def test_operator_script_switches_modes_on_time():
 def test_bad_exploration_scenarios_fail_with_the_key(change, key):
     s = change(load_scenario("basin_explore"))
     with pytest.raises(ConfigError, match=key.replace("[", r"\[").replace("]", r"\]")):
-        validate_scenario(s)
+        check_scenario(s)
 
 
 def test_known_poses_maps_the_scans_at_the_true_pose():
@@ -194,9 +196,9 @@ def test_known_poses_maps_the_scans_at_the_true_pose():
     s = dataclasses.replace(
         s, duration=6.0, estimator="oracle", slam=dataclasses.replace(s.slam, method="known_poses")
     )
-    validate_scenario(s)
+    check_scenario(s)
     with pytest.raises(ConfigError, match="slam.method"):
-        validate_scenario(dataclasses.replace(s, estimator="observer"))
+        check_scenario(dataclasses.replace(s, estimator="observer"))
     m = run_mission(s, record=False).metrics
     assert m["map_source"] == "slam:known_poses" and m["pose_source"].startswith("ground_truth")
     assert 0.2 < m["explored_fraction"] < 1.0

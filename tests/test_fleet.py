@@ -10,10 +10,11 @@ import shapely
 from pydrake.systems.analysis import Simulator
 
 from usvdrake.diagrams.fleet_diagram import build_fleet_diagram
-from usvdrake.scenario import FleetVesselConfig, RequestConfig, load_scenario
+from usvdrake.diagrams import load_scenario
+from usvdrake.scenario import FleetVesselConfig, RequestConfig
 from usvdrake.sensors.lidar3d import Lidar3D
 from usvdrake.sensors.lidar_model import LidarConfig, sensor_to_world
-from usvdrake.sensors.raycast import Scene
+from usvdrake.worlds.raycast import Scene
 from usvdrake.sensors.sampled_lidar import OtherVessels
 from usvdrake.systems.guidance.coordinator import Coordinator
 from usvdrake.systems.guidance.fleet_assignment import (
@@ -251,7 +252,7 @@ def test_fleet_diagram_has_a_boat_per_vessel_and_the_coordinator_in_one_scene():
 
 
 def test_a_vessel_that_fails_before_its_pickup_has_its_ride_reassigned(tmp_path):
-    from usvdrake.fleet import run_fleet_mission
+    from usvdrake.run.fleet import run_fleet_mission
 
     s = small_fleet(
         vessels=[
@@ -275,7 +276,7 @@ def test_a_vessel_that_fails_before_its_pickup_has_its_ride_reassigned(tmp_path)
 
 @pytest.mark.slow
 def test_canal_taxi_serves_every_request_apart_and_clear_with_optimal_assignments(tmp_path):
-    from usvdrake.fleet import run_fleet_mission
+    from usvdrake.run.fleet import run_fleet_mission
 
     s = load_scenario("canal_taxi")
     m = run_fleet_mission(s, tmp_path, record=False).metrics

@@ -8,7 +8,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from usvdrake.sensors.lidar_model import LidarConfig, LidarModel, preset_by_name
-from usvdrake.sensors.raycast import cast
+from usvdrake.worlds.raycast import cast
 from usvdrake.systems.slam.graph_slam import (
     GraphSlam,
     GraphSlamConfig,
@@ -302,7 +302,7 @@ POND_GRID = GraphSlamConfig(map_resolution=0.2, map_origin=[-25.0, -15.0], map_s
 @pytest.fixture(scope="module")
 def pond_offline(pond_records):
     """The offline runner's (stamps, poses, slam) on the clean pond stream, default pacing."""
-    from usvdrake.systems.slam.offline import run_graph_slam
+    from usvdrake.run.slam2d import run_graph_slam
 
     return run_graph_slam(pond_records[0], POND_GRID)
 
@@ -316,7 +316,7 @@ def _pond_ate(poses, truth) -> float:
 def test_five_percent_garbage_scans_keep_the_ate_within_1_5x(pond_records, pond_offline):
     """Issue 6's robustness check on the pond loop: 5 % of the scans replaced by garbage
     (random ranges, half-empty, NaN while flagged valid) — no exception, ATE ≤ 1.5× clean."""
-    from usvdrake.systems.slam.offline import GARBAGE_KINDS, corrupt_scans, run_graph_slam
+    from usvdrake.run.slam2d import GARBAGE_KINDS, corrupt_scans, run_graph_slam
 
     records, truth = pond_records
     bad, picked = corrupt_scans(records, 0.05, seed=3)
@@ -333,7 +333,7 @@ def test_offline_full_optimisations_are_throttled_to_the_log_time(pond_records, 
     """The offline runner runs the full-graph optimisation loops ask for at most once per
     ``full_period`` of the log's time, and once more after the last scan (what the poses are
     re-expressed from), as the LeafSystem's slower event does."""
-    from usvdrake.systems.slam.offline import FULL_PERIOD, _stamps_advance, run_graph_slam
+    from usvdrake.run.slam2d import FULL_PERIOD, _stamps_advance, run_graph_slam
 
     records, truth = pond_records
     span = records[-1].timestamp - records[0].timestamp
@@ -502,8 +502,8 @@ def test_offline_runs_with_the_worker_equal_the_same_schedule_solved_here(
     """The offline runner with full optimisations in the worker (merged a full_period after
     they start) gives the same poses and map to the bit as the same schedule solved in this
     process: the machine's speed does not enter the result."""
-    from usvdrake.systems.slam import graph_slam
-    from usvdrake.systems.slam.offline import run_graph_slam
+    from usvdrake.run.slam2d import run_graph_slam
+    from usvdrake.systems.slam.graph_slam import optimisation
     from usvdrake.systems.slam.pose_graph_solve import solved
 
     assert POND_GRID.full_in_worker
@@ -516,7 +516,7 @@ def test_offline_runs_with_the_worker_equal_the_same_schedule_solved_here(
         def submit(problem):
             return solved(problem)
 
-    monkeypatch.setattr(graph_slam, "worker", Here)
+    monkeypatch.setattr(optimisation, "worker", Here)
     _, poses_here, here = run_graph_slam(pond_records[0], POND_GRID)
     np.testing.assert_array_equal(poses_here, poses)
     np.testing.assert_array_equal(here.map.log_odds, slam.map.log_odds)
@@ -628,7 +628,7 @@ def test_an_unconverged_refinement_keeps_the_searched_step_in_a_corridor():
     from pathlib import Path
 
     from usvdrake.logs.carmen import read_carmen
-    from usvdrake.systems.slam.offline import LOG_CONFIG
+    from usvdrake.run.slam2d import LOG_CONFIG
 
     recs = list(read_carmen(Path(__file__).parent / "data/carmen/mit-csail-117.clf"))
     steps = {}

@@ -3,9 +3,10 @@
 import numpy as np
 import pytest
 
+from usvdrake.angles import wrap_angle
 from usvdrake.scenario import ControlConfig
 from usvdrake.systems.control.heading_speed_law import heading_speed_tau
-from usvdrake.systems.guidance.line_of_sight import advance_index, los_reference, wrap_angle
+from usvdrake.systems.guidance.line_of_sight import advance_index, los_reference
 from usvdrake.vessel import load_vessel
 
 WPS = np.array([[10.0, 0.0], [10.0, 10.0]])

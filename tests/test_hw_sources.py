@@ -16,14 +16,14 @@ from hardware_io.codecs import imu as mt
 from hardware_io.codecs import rplidar as rp
 from hardware_io.codecs import scip
 from hardware_io.codecs import velodyne as vlp
-from hardware_io.devices import (
+from hardware_io.emulators.devices import (
     SCIP_NO_RETURN_MM,
     RplidarDevice,
     ScipDevice,
     Vlp16Device,
     XsensDevice,
 )
-from hardware_io.pty_link import PtyDevice, WireFaults
+from hardware_io.emulators.pty_link import PtyDevice, WireFaults
 from hardware_io.systems.imu_serial_source import GOTO_MEASUREMENT, ImuSerialSource
 from hardware_io.systems.lidar_serial_source import LidarSerialSource
 from hardware_io.systems.velodyne_udp_source import VelodyneUdpSource

@@ -10,14 +10,8 @@ from usvdrake import cli
 from usvdrake.systems.estimation.identification import (
     DEFAULT_GUESS_FACTORS,
     IdentificationOptions,
-    OutputErrorData,
-    OutputErrorProblem,
     ScaledObjective,
-    default_weight,
     identify,
-    simulate_velocities,
-    velocity_derivatives,
-    velocity_jacobians,
 )
 from usvdrake.systems.estimation.identification_data import (
     ExcitationExperiment,
@@ -25,6 +19,14 @@ from usvdrake.systems.estimation.identification_data import (
     read_log,
     simulate_experiment,
     write_log,
+)
+from usvdrake.systems.estimation.output_error import (
+    OutputErrorData,
+    OutputErrorProblem,
+    default_weight,
+    simulate_velocities,
+    velocity_derivatives,
+    velocity_jacobians,
 )
 from usvdrake.systems.vessel.vessel_discrete import rk4
 from usvdrake.systems.vessel.vessel_dynamics import vessel_derivatives

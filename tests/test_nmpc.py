@@ -148,7 +148,7 @@ def test_campaign_run_145_no_longer_fails():
     from pathlib import Path
 
     from usvdrake import load_scenario, run_mission
-    from usvdrake.scenario import with_overrides
+    from usvdrake.diagrams import with_overrides
 
     path = Path(__file__).parent / "data" / "river_tracking_campaign_run_0145.yaml"
     m = run_mission(with_overrides(load_scenario(path), duration=20.0), record=False).metrics

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from usvdrake.sensors.raycast import ColumnLayout, Scene, cast
+from usvdrake.worlds.raycast import ColumnLayout, Scene, cast
 from usvdrake.worlds.solids import box, cylinder, prism
 
 FULL = ColumnLayout(az0=-np.pi, daz=2 * np.pi / 720, count=720)

@@ -7,7 +7,8 @@ import pytest
 
 from usvdrake import ConfigError, load_scenario, load_vessel
 from usvdrake.cli import main
-from usvdrake.scenario import available_scenarios, with_overrides
+from usvdrake.diagrams import with_overrides
+from usvdrake.scenario import available_scenarios
 from usvdrake.vessel import available_vessels
 
 GOOD = """

@@ -9,9 +9,9 @@ import pytest
 from usvdrake.cli import main
 from usvdrake.logs.mission_log import read_log_vectors
 from usvdrake.logs.sensor_stream import SensorMessage
-from usvdrake.mission import run_mission
-from usvdrake.scenario import load_scenario, with_overrides
-from usvdrake.slam3d import (
+from usvdrake.run.mission import run_mission
+from usvdrake.diagrams import load_scenario, with_overrides
+from usvdrake.run.slam3d import (
     _ticks,
     ablation,
     ablation_rows,

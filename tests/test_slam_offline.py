@@ -53,7 +53,7 @@ def test_slam2d_cli_runs_a_real_log_piece(tmp_path):
 
 
 def test_replay_lag_queues_scans_behind_slow_ones():
-    from usvdrake.systems.slam.offline import replay_lag
+    from usvdrake.run.slam2d import replay_lag
 
     # arrivals 0, 1, 2, 2, 3 (the fourth, stamped back in time, counts as arriving at 2); a
     # 2.5 s step on the second delays all after it: they end at 0.5, 3.5, 4.0, 4.5, 5.0
@@ -151,7 +151,7 @@ def write_bag(path: Path, n: int = 40) -> np.ndarray:
     from rosbags.rosbag1 import Writer
     from rosbags.typesys import Stores, get_typestore
 
-    from usvdrake.sensors.raycast import cast
+    from usvdrake.worlds.raycast import cast
     from usvdrake.worlds.synthetic import HOKUYO, cluttered_room
 
     store = get_typestore(Stores.ROS1_NOETIC)

@@ -13,6 +13,7 @@ from scipy.linalg import expm
 from scipy.optimize import linear_sum_assignment
 
 from usvdrake.analysis import stability as st
+from usvdrake.analysis.stability.roa import _CHANNEL_STATES
 from usvdrake.scenario import ControlConfig
 from usvdrake.systems.control.nmpc_problem import NmpcConfig, NmpcProblem
 from usvdrake.systems.control.passive_observer import PassiveObserver, fossen_gains
@@ -367,7 +368,7 @@ def test_roa_levels(roa_setup):
 
 def _grid_rho_channel(roa, xi, ch, n=801):
     """Brute force in the channel's plane: min V_c over the points where V̇_c ≥ 0."""
-    idx = st._CHANNEL_STATES[ch]
+    idx = _CHANNEL_STATES[ch]
     p = roa.P[np.ix_(idx, idx)]
     r = 1.3 * np.sqrt(roa.rho_channels[ch] * np.diag(np.linalg.inv(p)))
     g0, g1 = np.meshgrid(np.linspace(-r[0], r[0], n), np.linspace(-r[1], r[1], n))

@@ -15,8 +15,8 @@ from pydrake.systems.primitives import ConstantVectorSource
 
 from hardware_io import thrust_curve as tc
 from hardware_io.codecs import thrust as th
-from hardware_io.firmware import TICK_PERIOD_S, McuFirmware
-from hardware_io.pty_link import PtyDevice, WireFaults
+from hardware_io.emulators.firmware import TICK_PERIOD_S, McuFirmware
+from hardware_io.emulators.pty_link import PtyDevice, WireFaults
 from hardware_io.systems.thruster_serial_sink import NO_TELEMETRY_AGE, ThrusterSerialSink
 from hardware_io.systems.watchdog import Watchdog
 from hardware_io.transport import PortNotFoundError

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from usvdrake.sensors.raycast import ColumnLayout, _pairs, cast
+from usvdrake.worlds.raycast import ColumnLayout, _pairs, cast
 from usvdrake.worlds.basin import BEACH_SLOPE, LENGTH, START, WIDTH, ntnu_basin
 from usvdrake.worlds.natural import phu_tho_lake, valley
 

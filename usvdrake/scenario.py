@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from usvdrake.sensors.geodesy import DATUMS
 from usvdrake.sensors.gps_model import GpsConfig
 from usvdrake.sensors.imu_model import ImuConfig
 from usvdrake.sensors.lidar_model import LIDAR_PRESETS, LidarConfig
@@ -21,73 +22,33 @@ from usvdrake.systems.control.pd_controller import PdControllerConfig
 from usvdrake.systems.control.reference_model import ReferenceModelConfig
 from usvdrake.systems.estimation.nmhe_problem import NmheConfig
 from usvdrake.systems.guidance.frontier_explorer import ExplorerConfig
-from usvdrake.systems.guidance.operator import OperatorCommandConfig, parse_mode
+from usvdrake.systems.guidance.line_of_sight import ControlConfig, MissionConfig
+from usvdrake.systems.guidance.operator import OperatorCommandConfig
 from usvdrake.systems.guidance.taxi_pilot import TaxiConfig
 from usvdrake.systems.slam.graph_slam import GraphSlamConfig
 from usvdrake.systems.slam.hector import HectorConfig
 from usvdrake.systems.slam.lidar_inertial import LidarInertialConfig
+from usvdrake.systems.vessel.environment_model import (
+    CurrentConfig,
+    EnvironmentConfig,
+    WaveConfig,
+    WindConfig,
+)
 from usvdrake.typed_yaml import ConfigError, get_dotted, load_typed, resolve_yaml
 from usvdrake.vessel import VESSEL_DIR, available_vessels
+from usvdrake.worlds import available_worlds, make_world
+
+__all__ = [  # the configs a scenario composes, importable from here too
+    "ControlConfig",
+    "CurrentConfig",
+    "EnvironmentConfig",
+    "MissionConfig",
+    "WaveConfig",
+    "WindConfig",
+]
 
 SCENARIO_DIR = Path(__file__).parent / "scenarios"
 DEFAULT_SCENARIO = "canal_demo"
-ESTIMATORS = ("oracle", "nmhe", "observer", "slam")
-CONTROLLERS = ("baseline", "nmpc", "explore", "taxi")
-SLAM_METHODS = ("none", "graph", "hector", "known_poses", "factor_graph")
-
-
-@dataclass
-class CurrentConfig:
-    speed: float = 0.0  # [m/s] mean water velocity
-    direction_deg: float = 0.0  # [deg] direction the water flows towards (ENU, from east)
-    variation_std: float = 0.0  # [m/s] std of the slow speed variation (Gauss-Markov)
-    variation_time_constant: float = 60.0  # [s] correlation time of that variation
-
-
-@dataclass
-class WindConfig:
-    mean_speed: float = 0.0  # [m/s] mean wind speed at deck height
-    direction_deg: float = 0.0  # [deg] direction the air moves towards (ENU, from east)
-    gust_std: float = 0.0  # [m/s] std of the gust speed (first-order Gauss-Markov)
-    gust_time_constant: float = 5.0  # [s] gust correlation time
-    air_density: float = 1.225  # [kg/m^3]
-    cx: float = 0.6  # [-] surge wind-force coefficient (Fossen 2011 §8.1, small craft)
-    cy: float = 0.8  # [-] sway wind-force coefficient
-    cn: float = 0.05  # [-] yaw wind-moment coefficient (≈0 for fore-aft symmetric hulls)
-
-
-@dataclass
-class WaveConfig:
-    significant_height: float = 0.0  # [m] Hs of a Pierson-Moskowitz sea
-    peak_period: float = 2.0  # [s] Tp
-    direction_deg: float = 0.0  # [deg] direction the waves travel towards (ENU, from east)
-    components: int = 16  # [-] number of regular wave components summed
-
-
-@dataclass
-class EnvironmentConfig:
-    current: CurrentConfig = field(default_factory=CurrentConfig)
-    wind: WindConfig = field(default_factory=WindConfig)
-    waves: WaveConfig = field(default_factory=WaveConfig)
-    update_period: float = 0.1  # [s] step of the random processes (gusts, current variation)
-
-
-@dataclass
-class MissionConfig:
-    waypoints: list[list[float]] = field(default_factory=list)  # [[x, y], ...] [m], world ENU
-    speed: float = 0.0  # [m/s] cruise speed; 0 takes the vessel's cruise_speed
-    acceptance_radius: float = 2.0  # [m] a waypoint counts as reached inside this circle
-    slowdown_radius: float = 6.0  # [m] speed ramps down to zero over this distance to the goal
-
-
-@dataclass
-class ControlConfig:
-    rate_hz: float = 10.0  # [Hz] guidance + controller rate, zero-order hold (000 §VI: 10 Hz)
-    lookahead: float = 4.0  # [m] line-of-sight look-ahead distance Δ (Fossen 2011 §10.3.2)
-    heading_natural_frequency: float = 0.8  # [rad/s] closed-loop heading bandwidth ω_ψ
-    heading_damping: float = 1.0  # [-] closed-loop heading damping ζ_ψ
-    surge_bandwidth: float = 0.5  # [1/s] surge speed loop bandwidth
-    sway_bandwidth: float = 0.5  # [1/s] sway damping loop bandwidth (holonomic vessels)
 
 
 @dataclass
@@ -310,53 +271,11 @@ def _positive(file, key, value):
         raise ConfigError(file, key, "a positive number", repr(value))
 
 
-def _validate_exploration(s: Scenario, file) -> None:
-    if s.slam.method == "none":
-        raise ConfigError(
-            file, "slam.method", "'hector' or 'graph' (exploration maps as it goes)", "'none'"
-        )
-    if s.estimator not in ("observer", "oracle"):
-        raise ConfigError(
-            file, "estimator", "'observer' or 'oracle' with controller explore", repr(s.estimator)
-        )
-    e = s.exploration
-    for key in (
-        "explorer.resolution",
-        "explorer.planning_period",
-        "setpoint_rate_hz",
-        "observer.rate_hz",
-        "observer.bias_time_constant",
-        "pd.rate_hz",
-    ):
-        _positive(file, f"exploration.{key}", get_dotted(e, key))
-    for key in ("observer.cutoff", "pd.omega_n", "pd.zeta"):
-        v = get_dotted(e, key)
-        if len(v) != 3 or min(v) <= 0:
-            raise ConfigError(file, f"exploration.{key}", "3 positive numbers", repr(v))
-    for key in ("explorer.inflation", "explorer.near_free_radius", "explorer.visited_radius"):
-        if get_dotted(e, key) < 0:
-            raise ConfigError(file, f"exploration.{key}", "a number >= 0", repr(get_dotted(e, key)))
-    if e.explorer.connection_distance not in (1, 2, 3, 4):
-        raise ConfigError(
-            file,
-            "exploration.explorer.connection_distance",
-            "1, 2, 3 or 4",
-            repr(e.explorer.connection_distance),
-        )
-    for i, c in enumerate(e.commands):
-        key = f"exploration.commands[{i}]"
-        try:
-            mode = parse_mode(c.mode)
-        except ValueError:
-            raise ConfigError(file, f"{key}.mode", "explore, goto or stop", repr(c.mode)) from None
-        if mode.name == "GOTO" and len(c.goal) != 2:
-            raise ConfigError(file, f"{key}.goal", "[x, y] for goto", f"{len(c.goal)} numbers")
-
-
 def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
-    """Check values the types cannot: ranges, names, sizes. Returns ``s`` unchanged."""
-    from usvdrake.worlds import available_worlds, make_world  # late: worlds import scenario
+    """Check values the types cannot: ranges, names, sizes. Returns ``s`` unchanged.
 
+    What the chosen estimator, controller and SLAM method need of the scenario is their own
+    check (:func:`usvdrake.diagrams.check_scenario` runs both)."""
     vessel_path = Path(s.vessel)
     if (
         vessel_path.suffix not in (".yaml", ".yml")
@@ -375,10 +294,6 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
         raise ConfigError(
             file, "model_error", "6 positive factors on [m11 m22 m33 Xu Yv Nr]", repr(s.model_error)
         )
-    if s.controller not in CONTROLLERS:
-        raise ConfigError(
-            file, "controller", "one of " + ", ".join(CONTROLLERS), repr(s.controller)
-        )
     if s.nmpc.solver not in ("clarabel", "osqp"):
         raise ConfigError(file, "nmpc.solver", "'clarabel' or 'osqp'", repr(s.nmpc.solver))
     if s.nmpc.disturbance_source not in ("estimator", "internal"):
@@ -393,64 +308,6 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
     for key, n in (("nmpc.Wq", 6), ("nmpc.WN", 6), ("nmpc.velocity_bounds", 3)):
         if len(get_dotted(s, key)) != n:
             raise ConfigError(file, key, f"{n} numbers", f"{len(get_dotted(s, key))} numbers")
-    if s.estimator not in ESTIMATORS:
-        raise ConfigError(file, "estimator", "one of " + ", ".join(ESTIMATORS), repr(s.estimator))
-    if s.controller == "explore":
-        _validate_exploration(s, file)
-    elif s.estimator == "observer":
-        raise ConfigError(
-            file,
-            "estimator",
-            "'oracle' or 'nmhe' (the observer serves controller explore)",
-            "'observer'",
-        )
-    if s.slam.method not in SLAM_METHODS:
-        raise ConfigError(
-            file, "slam.method", "one of " + ", ".join(SLAM_METHODS), repr(s.slam.method)
-        )
-    if s.slam.method == "known_poses" and (s.controller != "explore" or s.estimator != "oracle"):
-        raise ConfigError(
-            file,
-            "slam.method",
-            "'known_poses' only with controller explore and estimator oracle",
-            repr(s.slam.method),
-        )
-    if s.slam.method == "factor_graph":
-        missing = [x for x in ("lidar3d", "imu", "gps") if x not in s.sensors.enabled]
-        if missing:
-            raise ConfigError(
-                file,
-                "sensors.enabled",
-                "lidar3d, imu and gps in the list (the factor graph reads them)",
-                repr(s.sensors.enabled),
-            )
-    elif s.slam.method != "none" and "lidar2d" not in s.sensors.enabled:
-        raise ConfigError(
-            file,
-            "sensors.enabled",
-            "'lidar2d' in the list (the SLAM reads it)",
-            repr(s.sensors.enabled),
-        )
-    if s.estimator == "slam" and (s.slam.method != "factor_graph" or s.controller == "explore"):
-        raise ConfigError(
-            file,
-            "estimator",
-            "'slam' only with slam.method factor_graph and a waypoint controller",
-            f"slam with slam.method {s.slam.method!r}, controller {s.controller!r}",
-        )
-    if s.estimator == "nmhe" and "pose" not in s.sensors.enabled:
-        raise ConfigError(
-            file,
-            "sensors.enabled",
-            "'pose' in the list (the NMHE measures it)",
-            repr(s.sensors.enabled),
-        )
-    if s.controller == "taxi":
-        _validate_fleet(s, file)
-    elif s.fleet.vessels:
-        raise ConfigError(file, "controller", "'taxi' (the scenario has a fleet)", s.controller)
-    if s.controller not in ("explore", "taxi") and not s.mission.waypoints:
-        raise ConfigError(file, "mission.waypoints", "at least one [x, y] waypoint", "none")
     for i, wp in enumerate(s.mission.waypoints):
         if len(wp) != 2:
             raise ConfigError(file, f"mission.waypoints[{i}]", "[x, y]", f"{len(wp)} numbers")
@@ -508,8 +365,6 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
             raise ConfigError(
                 file, f"sensors.{key}.dropout", "a probability in [0, 1)", repr(cfg.dropout)
             )
-    from usvdrake.sensors.geodesy import DATUMS
-
     if s.sensors.gps.datum and s.sensors.gps.datum not in DATUMS:
         raise ConfigError(
             file,
@@ -536,10 +391,8 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
     return s
 
 
-def _validate_fleet(s: Scenario, file) -> None:
+def validate_fleet(s: Scenario, file) -> None:
     """A taxi scenario: named boats in free water, requests between free-water points."""
-    from usvdrake.worlds import make_world
-
     f = s.fleet
     if not f.vessels:
         raise ConfigError(file, "fleet.vessels", "at least one vessel", "none")
@@ -608,8 +461,10 @@ def _check_free_water(s: Scenario, file, world) -> None:
             )
 
 
-def load_scenario(name_or_path: str | Path | None = None) -> Scenario:
-    """Load a shipped scenario by name, or a scenario YAML file; None gives the demo scenario."""
+def read_scenario(name_or_path: str | Path | None = None) -> Scenario:
+    """Read a shipped scenario by name, or a scenario YAML file (None: the demo scenario), and
+    check its values (:func:`validate_scenario`); :func:`usvdrake.load_scenario` also checks
+    its variants."""
     path = resolve_yaml(
         "scenario", DEFAULT_SCENARIO if name_or_path is None else name_or_path, SCENARIO_DIR
     )
@@ -619,7 +474,7 @@ def load_scenario(name_or_path: str | Path | None = None) -> Scenario:
     return validate_scenario(s, path)
 
 
-def with_overrides(s: Scenario, duration: float | None = None, seed: int | None = None) -> Scenario:
+def override(s: Scenario, duration: float | None = None, seed: int | None = None) -> Scenario:
     """A validated copy of ``s`` with command-line overrides (``s`` itself is never modified)."""
     changes = {}
     if duration is not None:

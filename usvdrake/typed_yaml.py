@@ -16,16 +16,9 @@ from typing import Any, TypeVar
 
 from pydrake.common.yaml import yaml_load, yaml_load_typed
 
+from usvdrake.errors import ConfigError
+
 T = TypeVar("T")
-
-
-class ConfigError(ValueError):
-    """A configuration file is wrong; the message is one line: file, key, expected, got."""
-
-    def __init__(self, file: str | Path, key: str, expected: str, got: str):
-        self.file, self.key, self.expected, self.got = str(file), key, expected, got
-        where = f"key '{key}'" if key else "document"
-        super().__init__(f"{file}: {where}: expected {expected}, got {got}")
 
 
 def _describe(value: Any) -> str:

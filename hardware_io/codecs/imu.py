@@ -79,6 +79,8 @@ __all__ = [
     "to_imu_sample",
 ]
 
+MID_GOTO_MEASUREMENT = 0x10  # host → MTi: enter measurement mode
+MID_GOTO_MEASUREMENT_ACK = 0x11  # MTi → host: acknowledged
 PREAMBLE = 0xFA
 BID_MASTER = 0xFF
 MID_MTDATA2 = 0x36

@@ -1,6 +1,6 @@
 """The emulated devices of the HIL rig as Drake systems, driven by the simulated station.
 
-Each system owns a :class:`~hardware_io.pty_link.PtyDevice` (the device end of a
+Each system owns a :class:`~hardware_io.emulators.pty_link.PtyDevice` (the device end of a
 pseudo-terminal) and plays one real device on it, in the protocol the hardware station's serial
 source speaks:
 
@@ -30,9 +30,9 @@ from pydrake.systems.framework import LeafSystem
 
 from hardware_io.codecs.imu import encode_mtdata2, from_imu_sample
 from hardware_io.codecs.nmea import GGA, encode_gga
-from hardware_io.devices import RplidarDevice
-from hardware_io.firmware import McuFirmware
-from hardware_io.pty_link import PtyDevice
+from hardware_io.emulators.devices import RplidarDevice
+from hardware_io.emulators.firmware import McuFirmware
+from hardware_io.emulators.pty_link import PtyDevice
 from usvdrake.sensors.geodesy import LocalFrame
 from usvdrake.sensors.imu_model import yaw_quaternion
 from usvdrake.sensors.messages import GpsFix, ImuSample, LaserScan
@@ -47,7 +47,8 @@ class McuEmulator(LeafSystem):
     """The thruster microcontroller on ``pty``.
 
     Every ``tick`` seconds (first at 0): read the host's bytes, feed them to the
-    :class:`~hardware_io.firmware.McuFirmware` with the wall-clock time, run its watchdog, and
+    :class:`~hardware_io.emulators.firmware.McuFirmware` with the wall-clock time, run its
+    watchdog, and
     hold the forces of the PWM it outputs (the station's ``thruster_command`` layout) in
     discrete state; every ``telemetry_period`` send a telemetry frame.
     """
@@ -205,7 +206,7 @@ class TruthRecorder(LeafSystem):
 
 
 class RplidarEmulator(LeafSystem):
-    """A Slamtec RPLIDAR A1 on ``pty`` (:class:`hardware_io.devices.RplidarDevice`).
+    """A Slamtec RPLIDAR A1 on ``pty`` (:class:`hardware_io.emulators.devices.RplidarDevice`).
 
     Input ``lidar_scan``: the simulated station's :class:`LaserScan`. Every ``poll_period`` it
     answers the host's requests (STOP, SCAN, GET_INFO ...); once the host has started a scan,

@@ -37,10 +37,11 @@ from hardware_io.emulators.device_systems import (
     RplidarEmulator,
     TruthRecorder,
 )
-from hardware_io.firmware import McuFirmware
-from hardware_io.pty_link import PtyDevice, WireFaults
+from hardware_io.emulators.firmware import McuFirmware
+from hardware_io.emulators.pty_link import PtyDevice, WireFaults
+from usvdrake.diagrams import load_scenario
 from usvdrake.diagrams.station import make_sim_station
-from usvdrake.scenario import Scenario, load_scenario
+from usvdrake.scenario import Scenario
 from usvdrake.sensors.pose_sensor import PoseSensorConfig
 from usvdrake.vessel import load_vessel
 from usvdrake.worlds import make_world

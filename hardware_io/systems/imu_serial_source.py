@@ -4,8 +4,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-from hardware_io.codecs.imu import MtError, MtStream, encode_frame, to_imu_sample
-from hardware_io.devices import MID_GOTO_MEASUREMENT
+from hardware_io.codecs.imu import (
+    MID_GOTO_MEASUREMENT,
+    MtError,
+    MtStream,
+    encode_frame,
+    to_imu_sample,
+)
 from hardware_io.systems.device_source import DeviceSource
 from hardware_io.transport import SerialTransport
 from usvdrake.sensors.messages import ImuSample

@@ -4,8 +4,8 @@ import numpy as np
 
 from usvdrake.sensors.lidar_model import LidarConfig, Sweep
 from usvdrake.sensors.messages import PointCloud
-from usvdrake.sensors.raycast import Scene
 from usvdrake.sensors.sampled_lidar import OtherVessels, SampledLidar
+from usvdrake.worlds.raycast import Scene
 
 STREAM_LIDAR3D = 30
 

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from usvdrake.random_streams import generator
-from usvdrake.sensors.raycast import ColumnLayout, Scene, cast
+from usvdrake.worlds.raycast import ColumnLayout, Scene, cast
 
 
 @dataclass(frozen=True)

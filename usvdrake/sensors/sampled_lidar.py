@@ -8,7 +8,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
 from usvdrake.sensors.lidar_model import LidarConfig, LidarModel, Sweep, preset_by_name
-from usvdrake.sensors.raycast import Scene
+from usvdrake.worlds.raycast import Scene
 from usvdrake.worlds.solids import box
 
 

@@ -1,7 +1,7 @@
 """Solids of a world: vertical prisms over a convex footprint (polygon or circle), between
 z_min and z_max [m] above the water, optionally cut by one more half-space (sloped faces such as
 a wave-generator beach). One description feeds Meshcat, the clearance and occupancy queries and
-the ray caster (``usvdrake.sensors.raycast``), so what a person sees is what the sensors get.
+the ray caster (``usvdrake.worlds.raycast``), so what a person sees is what the sensors get.
 """
 
 from dataclasses import dataclass

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from usvdrake.sensors.raycast import ColumnLayout, Scene
+from usvdrake.worlds.raycast import ColumnLayout, Scene
 from usvdrake.worlds.solids import box, cylinder
 
 # The Hokuyo UTM-30LX beam layout: 270°, 0.25°, 1081 beams.

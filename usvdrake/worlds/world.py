@@ -13,6 +13,7 @@ import numpy as np
 import shapely
 from scipy.spatial import cKDTree
 
+from usvdrake.worlds.raycast import ColumnLayout, Scene, cast
 from usvdrake.worlds.solids import Solid
 
 SKY_CELL = 2.0  # [m] resolution of the memoised sky-blockage map
@@ -81,8 +82,6 @@ class World:
     @cached_property
     def scene(self):
         """The ray-casting acceleration structure, built once."""
-        from usvdrake.sensors.raycast import Scene
-
         return Scene.from_solids(self.solids)
 
     @cached_property
@@ -137,8 +136,6 @@ class World:
     ) -> float:
         """Fraction of azimuths whose line of sight at ``elevation_deg`` is blocked within
         300 m: the urban-canyon measure that degrades GPS beside tall facades."""
-        from usvdrake.sensors.raycast import ColumnLayout, cast
-
         layout = ColumnLayout(az0=0.0, daz=2 * np.pi / beams, count=beams)
         r = cast(
             self.scene, layout, [np.tan(np.deg2rad(elevation_deg))], np.array([x, y]), z, 0.0, 300.0

@@ -3,8 +3,8 @@
 import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from usvdrake.scenario import ControlConfig
 from usvdrake.systems.control.heading_speed_law import heading_speed_tau
+from usvdrake.systems.guidance.line_of_sight import ControlConfig
 from usvdrake.vessel import Hydrodynamics
 
 

@@ -10,8 +10,8 @@ rate k_u. The papers' controllers (NMPC, PD + observer + reference model) replac
 
 import numpy as np
 
-from usvdrake.scenario import ControlConfig
-from usvdrake.systems.guidance.line_of_sight import wrap_angle
+from usvdrake.angles import wrap_angle
+from usvdrake.systems.guidance.line_of_sight import ControlConfig
 from usvdrake.vessel import Hydrodynamics
 
 

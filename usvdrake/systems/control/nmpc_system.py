@@ -46,6 +46,10 @@ class Nmpc(LeafSystem):
         - thruster_command
         - predicted_trajectory
         - nmpc_failures
+        - nmpc_diagnostics
+
+    ``nmpc_diagnostics`` = [solves, failures, median solve time [ms], 95th percentile [ms]]
+    over the run so far (what the mission's metrics report).
 
     Every dt seconds, ``cfg.update_offset`` after the sensors sample (after the estimator's
     update, see ``Nmhe``): sample the reference over the horizon, solve from the estimate with the
@@ -89,6 +93,12 @@ class Nmpc(LeafSystem):
             "nmpc_failures",
             1,
             self._calc_failures,
+            prerequisites_of_calc={self.abstract_state_ticket(self._mem)},
+        )
+        self.DeclareVectorOutputPort(
+            "nmpc_diagnostics",
+            4,
+            self._calc_diagnostics,
             prerequisites_of_calc={self.abstract_state_ticket(self._mem)},
         )
 
@@ -161,3 +171,10 @@ class Nmpc(LeafSystem):
 
     def _calc_failures(self, context, output):
         output.SetFromVector([self.memory(context).failures])
+
+    def _calc_diagnostics(self, context, output):
+        mem = self.memory(context)
+        ms = mem.solve_ms if len(mem.solve_ms) else np.zeros(1)
+        output.SetFromVector(
+            [len(mem.solve_ms), mem.failures, np.median(ms), np.percentile(ms, 95)]
+        )

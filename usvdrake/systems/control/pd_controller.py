@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from usvdrake.systems.guidance.line_of_sight import wrap_angle
+from usvdrake.angles import wrap_angle
 from usvdrake.systems.vessel.vessel_dynamics import rotation
 from usvdrake.vessel import Hydrodynamics
 

@@ -42,7 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from usvdrake.systems.guidance.line_of_sight import wrap_angle
+from usvdrake.angles import wrap_angle
 
 _PLANAR = slice(0, 2)
 

@@ -5,7 +5,8 @@ import time
 import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from usvdrake.systems.estimation.nmhe_problem import NmheConfig, NmheProblem, NmheWindow
+from usvdrake.systems.estimation.nmhe_model import NmheConfig, NmheWindow
+from usvdrake.systems.estimation.nmhe_problem import NmheProblem
 from usvdrake.vessel import VesselParams
 
 # Diagnostics: [failures, solves, last solve [ms], max solve [ms], total solve time [ms], events]

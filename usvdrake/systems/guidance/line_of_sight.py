@@ -7,14 +7,29 @@ is taken when the vessel is within the acceptance radius of p_{k+1} or has passe
 track. The speed reference ramps down linearly within ``slowdown_radius`` of the final waypoint.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from usvdrake.angles import wrap_angle
 
-def wrap_angle(a):
-    """Wrap to (−π, π]."""
-    return np.arctan2(np.sin(a), np.cos(a))
+
+@dataclass
+class MissionConfig:
+    waypoints: list[list[float]] = field(default_factory=list)  # [[x, y], ...] [m], world ENU
+    speed: float = 0.0  # [m/s] cruise speed; 0 takes the vessel's cruise_speed
+    acceptance_radius: float = 2.0  # [m] a waypoint counts as reached inside this circle
+    slowdown_radius: float = 6.0  # [m] speed ramps down to zero over this distance to the goal
+
+
+@dataclass
+class ControlConfig:
+    rate_hz: float = 10.0  # [Hz] guidance + controller rate, zero-order hold (000 §VI: 10 Hz)
+    lookahead: float = 4.0  # [m] line-of-sight look-ahead distance Δ (Fossen 2011 §10.3.2)
+    heading_natural_frequency: float = 0.8  # [rad/s] closed-loop heading bandwidth ω_ψ
+    heading_damping: float = 1.0  # [-] closed-loop heading damping ζ_ψ
+    surge_bandwidth: float = 0.5  # [1/s] surge speed loop bandwidth
+    sway_bandwidth: float = 0.5  # [1/s] sway damping loop bandwidth (holonomic vessels)
 
 
 @dataclass

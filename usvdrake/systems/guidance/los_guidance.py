@@ -3,8 +3,12 @@
 import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from usvdrake.scenario import ControlConfig, MissionConfig
-from usvdrake.systems.guidance.line_of_sight import advance_index, los_reference
+from usvdrake.systems.guidance.line_of_sight import (
+    ControlConfig,
+    MissionConfig,
+    advance_index,
+    los_reference,
+)
 
 
 class LosGuidance(LeafSystem):

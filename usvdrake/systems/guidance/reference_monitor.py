@@ -2,9 +2,10 @@
 whether the mission is over (the reference has ended and the last goal is reached)."""
 
 import numpy as np
+from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
-from usvdrake.systems.guidance.line_of_sight import wrap_angle
+from usvdrake.angles import wrap_angle
 
 
 def reference_row(reference, t: float, q) -> list[float]:
@@ -25,11 +26,13 @@ class ReferenceMonitor(LeafSystem):
         output_ports:
         - reference
         - mission_complete
+        - reference_track
 
     ``reference`` = [ψ_ref [rad], u_ref [m/s], e [m]] with e the distance from the estimate to
     the reference position now (the same layout the LOS guidance logs); ``mission_complete`` =
     [1] once the reference has ended and the estimate is within ``acceptance_radius`` [m] of its
-    final position.
+    final position. ``reference_track`` is the timed reference itself (constant; metrics
+    score the tracking against it).
     """
 
     def __init__(self, reference, acceptance_radius: float):
@@ -38,6 +41,12 @@ class ReferenceMonitor(LeafSystem):
         self._est = self.DeclareVectorInputPort("state_estimate", 6)
         self.DeclareVectorOutputPort("reference", 3, self._calc_reference)
         self.DeclareVectorOutputPort("mission_complete", 1, self._calc_complete)
+        self.DeclareAbstractOutputPort(
+            "reference_track",
+            lambda: AbstractValue.Make(reference),
+            lambda context, value: value.set_value(self._ref),
+            prerequisites_of_calc={self.nothing_ticket()},
+        )
 
     def _calc_reference(self, context, output):
         output.SetFromVector(reference_row(self._ref, context.get_time(), self._est.Eval(context)))

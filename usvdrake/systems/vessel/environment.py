@@ -3,8 +3,7 @@
 import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from usvdrake.scenario import EnvironmentConfig
-from usvdrake.systems.vessel.environment_model import EnvironmentModel
+from usvdrake.systems.vessel.environment_model import EnvironmentConfig, EnvironmentModel
 from usvdrake.vessel import VesselParams
 
 

@@ -21,13 +21,49 @@ with w_k drawn from a generator seeded by (seed, stream, k): the same seed and s
 number whatever else ran before, so a diagram can be re-simulated and reset freely.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from usvdrake.random_streams import white_sample
-from usvdrake.scenario import EnvironmentConfig
 from usvdrake.vessel import VesselParams
+
+
+@dataclass
+class CurrentConfig:
+    speed: float = 0.0  # [m/s] mean water velocity
+    direction_deg: float = 0.0  # [deg] direction the water flows towards (ENU, from east)
+    variation_std: float = 0.0  # [m/s] std of the slow speed variation (Gauss-Markov)
+    variation_time_constant: float = 60.0  # [s] correlation time of that variation
+
+
+@dataclass
+class WindConfig:
+    mean_speed: float = 0.0  # [m/s] mean wind speed at deck height
+    direction_deg: float = 0.0  # [deg] direction the air moves towards (ENU, from east)
+    gust_std: float = 0.0  # [m/s] std of the gust speed (first-order Gauss-Markov)
+    gust_time_constant: float = 5.0  # [s] gust correlation time
+    air_density: float = 1.225  # [kg/m^3]
+    cx: float = 0.6  # [-] surge wind-force coefficient (Fossen 2011 §8.1, small craft)
+    cy: float = 0.8  # [-] sway wind-force coefficient
+    cn: float = 0.05  # [-] yaw wind-moment coefficient (≈0 for fore-aft symmetric hulls)
+
+
+@dataclass
+class WaveConfig:
+    significant_height: float = 0.0  # [m] Hs of a Pierson-Moskowitz sea
+    peak_period: float = 2.0  # [s] Tp
+    direction_deg: float = 0.0  # [deg] direction the waves travel towards (ENU, from east)
+    components: int = 16  # [-] number of regular wave components summed
+
+
+@dataclass
+class EnvironmentConfig:
+    current: CurrentConfig = field(default_factory=CurrentConfig)
+    wind: WindConfig = field(default_factory=WindConfig)
+    waves: WaveConfig = field(default_factory=WaveConfig)
+    update_period: float = 0.1  # [s] step of the random processes (gusts, current variation)
+
 
 GRAVITY = 9.81  # [m/s^2]
 STREAM_GUST, STREAM_CURRENT = 1, 2

@@ -26,11 +26,20 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from pydrake.systems.analysis import Simulator, SimulatorStatus
 from pydrake.systems.framework import DiagramBuilder, EventStatus, LeafSystem
 from pydrake.systems.primitives import LogVectorOutput
 
+from usvdrake.analysis.metrics import vessel_clearance
+from usvdrake.diagrams.hardware_station import close_hardware
+from usvdrake.diagrams.vessel_diagram import build_vessel_diagram
+from usvdrake.jsonable import jsonable
+from usvdrake.logs.mission_log import MissionLogWriter, add_mission_recorder
+from usvdrake.run.campaign import scenario_yaml
+from usvdrake.run.mission import control_estimation_metrics, run_mission
+from usvdrake.run.simulate import simulate
 from usvdrake.scenario import Scenario
+from usvdrake.vessel import load_vessel
+from usvdrake.worlds import make_world
 
 __all__ = ["HilResult", "run_hil"]
 
@@ -166,9 +175,6 @@ def run_hil(
     scenario is also simulated (no hardware, as fast as possible) over the same duration and
     ``position_rmse_ratio_vs_sim`` compares the two.
     """
-    from usvdrake.campaign import scenario_yaml
-    from usvdrake.diagrams.hardware_station import close_hardware
-    from usvdrake.diagrams.vessel_diagram import build_vessel_diagram
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -220,41 +226,20 @@ def run_hil(
         diagram = builder.Build()
         diagram.set_name("hil_mission")
 
-        simulator = Simulator(diagram)
-        simulator.set_target_realtime_rate(1.0)
+        # the host runs on the wall clock: the devices (or the rig) set the pace
+        outcome = simulate(
+            diagram, duration, vessel, realtime_rate=1.0, progress=progress, step=0.5, unit="s"
+        )
+        simulator, t = outcome.simulator, outcome.sim_time
         context = simulator.get_mutable_context()
-        complete = vessel.GetOutputPort("mission_complete")
-
-        def monitor(root):
-            if complete.Eval(vessel.GetMyContextFromRoot(root))[0] > 0:
-                return EventStatus.ReachedTermination(diagram, "mission complete")
-            return EventStatus.Succeeded()
-
-        simulator.set_monitor(monitor)
-        bar = None
-        if progress:
-            from tqdm import tqdm
-
-            bar = tqdm(total=duration, unit="s", bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} s")
-        wall0 = time.perf_counter()
-        simulator.Initialize()
-        t = 0.0
-        while t < duration - 1e-9:
-            status = simulator.AdvanceTo(min(t + 0.5, duration))
-            if bar is not None:
-                bar.update(context.get_time() - t)
-            t = context.get_time()
-            if status.reason() == SimulatorStatus.ReturnReason.kReachedTerminationCondition:
-                break
         tracked_until = t
-        lag_s = (time.perf_counter() - wall0) - t
+        lag_s = outcome.wall_time - t
+        cut0 = time.perf_counter()
         if cut_link and rig is not None:
             rig.send("cut thrusters")
             simulator.set_monitor(lambda root: EventStatus.Succeeded())
             simulator.AdvanceTo(t + CUT_OBSERVATION_S)
-        if bar is not None:
-            bar.close()
-        wall = time.perf_counter() - wall0
+        wall = outcome.wall_time + (time.perf_counter() - cut0)
         report = rig.stop() if rig is not None else None
         host_status = _hardware_status(vessel, context)
         close_hardware(diagram)
@@ -286,8 +271,6 @@ def run_hil(
         states = truth_on_host_clock(report, np.asarray(clock.rows, float), times)
         metrics.update(_truth_metrics(scenario, vessel, context, logs, keep, times, states, report))
         if compare_sim:
-            from usvdrake.mission import run_mission
-
             sim = run_mission(dataclasses.replace(scenario, duration=tracked_until), record=False)
             metrics["sim_position_rmse_m"] = sim.metrics.get("position_rmse_m")
             metrics["sim_heading_rmse_rad"] = sim.metrics.get("heading_rmse_rad")
@@ -295,8 +278,6 @@ def run_hil(
                 metrics["position_rmse_ratio_vs_sim"] = (
                     metrics["position_rmse_m"] / metrics["sim_position_rmse_m"]
                 )
-
-    from usvdrake.jsonable import jsonable
 
     (out / "metrics.json").write_text(json.dumps(jsonable(metrics), indent=2) + "\n")
     files = {"metrics": out / "metrics.json", "log": out / "log.mcap"}
@@ -309,10 +290,6 @@ def run_hil(
 def _truth_metrics(scenario, vessel, context, logs, keep, times, states, report) -> dict:
     """Tracking and estimation against the rig's truth, clearance to the world, the watchdog
     and the wires."""
-    from usvdrake.analysis.metrics import vessel_clearance
-    from usvdrake.mission import control_estimation_metrics
-    from usvdrake.vessel import load_vessel
-    from usvdrake.worlds import make_world
 
     def logged(name):
         return logs[name].data().T[keep] if name in logs else None
@@ -378,8 +355,6 @@ def _hardware_status(vessel, context) -> dict:
 
 def _add_log(builder, vessel, path: Path, scenario):
     """The mission log (``log.mcap``) of the host diagram: its writer, recorder attached."""
-    from usvdrake.logs.mission_log import MissionLogWriter, add_mission_recorder
-
     writer = MissionLogWriter(path)
     add_mission_recorder(builder, vessel, writer, scenario.visualization.rate_hz)
     return writer

@@ -2,7 +2,8 @@
 
 What the STM32 (Roboat II, 000) / Arduino (NTNU round vessel, 003) does with the protocol of
 ``hardware_io/PROTOCOL.md`` (codec: :mod:`hardware_io.codecs.thrust`), without Drake and without
-I/O, so a device emulator (a :class:`hardware_io.pty_link.PtyDevice` loop) and tests can stand in
+I/O, so a device emulator (a :class:`~hardware_io.emulators.pty_link.PtyDevice` loop) and tests
+can stand in
 for the board:
 
 * :meth:`McuFirmware.feed` — received bytes → :class:`~hardware_io.codecs.thrust.FrameParser`;

@@ -3,7 +3,6 @@ served or the time is up, and measure the service and its safety."""
 
 import json
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 import shapely
@@ -13,13 +12,11 @@ from pydrake.systems.primitives import LogVectorOutput
 
 from usvdrake.analysis.metrics import vessel_clearance
 from usvdrake.diagrams.fleet_diagram import build_fleet_diagram
+from usvdrake.run.simulate import MissionResult, make_meshcat, simulate
 from usvdrake.scenario import Scenario
 from usvdrake.systems.guidance.taxi_pilot import PHASES
 from usvdrake.vessel import VesselParams, load_vessel
 from usvdrake.worlds import make_world
-
-if TYPE_CHECKING:  # mission imports this module lazily; no import cycle at run time
-    from usvdrake.mission import MissionResult
 
 
 def hull_polygons(states: np.ndarray, vessel: VesselParams) -> np.ndarray:
@@ -51,7 +48,7 @@ def run_fleet_mission(
     record: bool = True,
     progress: bool = False,
     realtime_rate: float = 0.0,
-) -> "MissionResult":
+) -> MissionResult:
     """Simulate ``scenario``'s fleet; returns its metrics and each boat's track (a
     ``MissionResult``; also ``metrics.json``, ``rides.json``, ``fleet.png`` and, with a Meshcat,
     ``replay.html`` in ``out_dir``).
@@ -62,8 +59,6 @@ def run_fleet_mission(
     ``min_clearance_m`` per boat and overall, each boat's path length, NMPC failures, replans and
     holds, and the wall time.
     """
-    from usvdrake.mission import MissionResult, make_meshcat, simulate_until
-
     vessel = load_vessel(scenario.vessel)
     world = make_world(scenario.world, scenario.seed)
     if meshcat is None and record and out_dir is not None:
@@ -89,18 +84,20 @@ def run_fleet_mission(
         done = status_port.Eval(fleet.GetMyContextFromRoot(context))[0]
         return f"served {int(done)}/{n_requests}"
 
-    simulator, t, complete, wall = simulate_until(
+    outcome = simulate(
         diagram,
-        scenario,
+        scenario.duration,
         fleet,
         "all_served",
         "every ride served",
+        settings=scenario.simulation,
         realtime_rate=realtime_rate,
         progress=progress,
         step=5.0,
         postfix=served,
     )
-    context = simulator.get_context()
+    t, complete, wall = outcome.sim_time, outcome.done, outcome.wall_time
+    context = outcome.simulator.get_context()
 
     coordinator = fleet.GetSubsystemByName("coordinator")
     ledger = coordinator.dispatch(coordinator.GetMyContextFromRoot(context))

@@ -62,8 +62,9 @@ from pathlib import Path
 
 import numpy as np
 
+from usvdrake.diagrams import check_scenario, with_overrides
 from usvdrake.jsonable import jsonable
-from usvdrake.scenario import Scenario, validate_scenario, with_overrides
+from usvdrake.scenario import Scenario
 from usvdrake.typed_yaml import ConfigError
 from usvdrake.viz.report import png_base64
 
@@ -155,7 +156,7 @@ def _draw(base: Scenario, rng: np.random.Generator, r: Ranges, hull_length: floa
 def randomise(scenario: Scenario, rng: np.random.Generator, ranges: Ranges = RANGES) -> Scenario:
     """A validated random variant of ``scenario`` (see the module docstring for what varies).
 
-    Draws until the variant passes :func:`usvdrake.scenario.validate_scenario` (start and
+    Draws until the variant passes :func:`usvdrake.scenario.check_scenario` (start and
     waypoints in free water of the variant's world); ConfigError after ``ranges.max_draws``."""
     from usvdrake.vessel import load_vessel
 
@@ -164,7 +165,7 @@ def randomise(scenario: Scenario, rng: np.random.Generator, ranges: Ranges = RAN
     for _ in range(ranges.max_draws):
         s = _draw(scenario, rng, ranges, hull_length)
         try:
-            return validate_scenario(s, f"{scenario.name} (randomised)")
+            return check_scenario(s, f"{scenario.name} (randomised)")
         except ConfigError as e:
             error = e
     raise ConfigError(
@@ -213,14 +214,14 @@ def scenario_from_yaml(text: str, file: str = "scenario") -> Scenario:
     """Parse and validate scenario YAML text (the same values ``load_scenario`` gives)."""
     from pydrake.common.yaml import yaml_load_typed
 
-    return validate_scenario(yaml_load_typed(schema=Scenario, data=text, defaults=Scenario()), file)
+    return check_scenario(yaml_load_typed(schema=Scenario, data=text, defaults=Scenario()), file)
 
 
 def run_one(index: int, text: str) -> dict:
     """The Dask task: simulate one run's scenario YAML; never raises (errors are the result)."""
     t0 = (time.perf_counter(), time.process_time())
     try:
-        from usvdrake.mission import run_mission
+        from usvdrake.run.mission import run_mission
 
         metrics = run_mission(scenario_from_yaml(text, f"run {index}"), record=False).metrics
         return {"status": "completed", "error": None, "metrics": metrics, **_took(t0)}

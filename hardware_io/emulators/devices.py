@@ -3,7 +3,8 @@
 Each model turns simulated sensor messages into the bytes the real device sends, and reacts to
 the bytes a host sends it, using only the codecs in :mod:`hardware_io.codecs`. A model is fed
 whatever arrived on the wire (split anywhere, garbage included) and returns the reply bytes;
-put it behind a :class:`hardware_io.pty_link.PtyDevice` (serial) or a UDP socket to emulate the
+put it behind a :class:`~hardware_io.emulators.pty_link.PtyDevice` (serial) or a UDP socket to
+emulate the
 sensor for a host driver.
 
 * :class:`RplidarDevice`: Slamtec RPLIDAR A1 (serial, 115200 8N1).
@@ -27,6 +28,7 @@ from hardware_io.codecs import imu as mt
 from hardware_io.codecs import rplidar as rp
 from hardware_io.codecs import scip
 from hardware_io.codecs import velodyne as vlp
+from hardware_io.codecs.imu import MID_GOTO_MEASUREMENT, MID_GOTO_MEASUREMENT_ACK
 from usvdrake.sensors.messages import ImuSample, LaserScan, PointCloud
 
 __all__ = ["RplidarDevice", "ScipDevice", "Vlp16Device", "XsensDevice"]
@@ -356,8 +358,6 @@ class ScipDevice:
 
 MID_REQ_DID = 0x00
 MID_DEVICE_ID = 0x01
-MID_GOTO_MEASUREMENT = 0x10
-MID_GOTO_MEASUREMENT_ACK = 0x11
 MID_REQ_PRODUCT_CODE = 0x1C
 MID_PRODUCT_CODE = 0x1D
 MID_GOTO_CONFIG = 0x30

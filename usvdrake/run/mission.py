@@ -2,14 +2,11 @@
 
 import copy
 import json
-import time
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from pydrake.geometry import Meshcat, MeshcatParams
-from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator, SimulatorStatus
-from pydrake.systems.framework import DiagramBuilder, EventStatus
+from pydrake.geometry import Meshcat
+from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput
 
 from usvdrake.analysis.metrics import (
@@ -22,47 +19,13 @@ from usvdrake.analysis.metrics import (
     vessel_clearance,
 )
 from usvdrake.diagrams.vessel_diagram import build_vessel_diagram
+from usvdrake.logs.mission_log import MissionLogWriter, add_mission_recorder
+from usvdrake.run.fleet import run_fleet_mission
+from usvdrake.run.simulate import MissionResult, make_meshcat, simulate, write_tum
 from usvdrake.scenario import Scenario
 from usvdrake.vessel import load_vessel
+from usvdrake.viz.report import write_report
 from usvdrake.worlds import make_world
-
-
-def make_meshcat(port: int | None = None) -> Meshcat:
-    """A Meshcat server bound to localhost only (never exposed on the network)."""
-    params = MeshcatParams()
-    params.host = "localhost"
-    if port is not None:
-        params.port = port
-    return Meshcat(params)
-
-
-@dataclass
-class MissionResult:
-    metrics: dict
-    times: np.ndarray  # [s] log sample times
-    states: np.ndarray  # (n × 6) ground truth [x y ψ u v r]
-    reference: np.ndarray  # (n × 3) [ψ_d, u_d, e]
-    thrust: np.ndarray  # (n × command size) applied thrust
-    files: dict = field(default_factory=dict)  # name → path of what was written
-    tracks: dict = field(default_factory=dict)  # fleets: boat name → (n × 6) ground truth
-
-
-def _write_tum(path: Path, times: np.ndarray, states: np.ndarray) -> None:
-    """TUM trajectory: t x y z qx qy qz qw (yaw-only quaternion)."""
-    half = states[:, 2] / 2
-    rows = np.column_stack(
-        [
-            times,
-            states[:, 0],
-            states[:, 1],
-            np.zeros_like(times),
-            np.zeros_like(times),
-            np.zeros_like(times),
-            np.sin(half),
-            np.cos(half),
-        ]
-    )
-    np.savetxt(path, rows, fmt="%.6f", header="t x y z qx qy qz qw")
 
 
 def _exploration_summary(
@@ -135,68 +98,6 @@ def control_estimation_metrics(
     return out
 
 
-def simulate_until(
-    diagram,
-    scenario: Scenario,
-    system,
-    done_port: str,
-    reason: str,
-    realtime_rate: float = 0.0,
-    progress: bool = False,
-    step: float | None = None,
-    postfix=None,
-):
-    """Simulate ``diagram`` with the scenario's integrator settings until ``system``'s output
-    ``done_port`` (a subsystem of ``diagram``) reads > 0 or ``scenario.duration`` elapses,
-    advancing ``step`` sim-seconds at a time (default: 1/200 of the run, at least 0.5 s) under
-    a progress bar if asked (``postfix(context)`` adds text to it). Returns (simulator, final
-    time [s], whether it ended done, wall time [s])."""
-    simulator = Simulator(diagram)
-    ResetIntegratorFromFlags(
-        simulator, scenario.simulation.integrator, scenario.simulation.max_step
-    )
-    simulator.get_mutable_integrator().set_target_accuracy(scenario.simulation.accuracy)
-    simulator.set_target_realtime_rate(realtime_rate)
-    context = simulator.get_mutable_context()
-    port = system.GetOutputPort(done_port)
-
-    def monitor(root_context):
-        if port.Eval(system.GetMyContextFromRoot(root_context))[0] > 0:
-            return EventStatus.ReachedTermination(diagram, reason)
-        return EventStatus.Succeeded()
-
-    simulator.set_monitor(monitor)
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(
-            total=scenario.duration,
-            unit="sim s",
-            bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}{postfix}]",
-        )
-    step = step or max(0.5, scenario.duration / 200.0)
-    wall0 = time.perf_counter()
-    t, complete = 0.0, False
-    try:
-        simulator.Initialize()
-        while t < scenario.duration - 1e-9:
-            status = simulator.AdvanceTo(min(t + step, scenario.duration))
-            new_t = context.get_time()
-            if bar is not None:
-                if postfix is not None:
-                    bar.set_postfix_str(postfix(context))
-                bar.update(new_t - t)
-            t = new_t
-            if status.reason() == SimulatorStatus.ReturnReason.kReachedTerminationCondition:
-                complete = True
-                break
-    finally:
-        if bar is not None:
-            bar.close()
-    return simulator, t, complete, time.perf_counter() - wall0
-
-
 def run_mission(
     scenario: Scenario,
     out_dir: str | Path | None = None,
@@ -212,12 +113,10 @@ def run_mission(
     ``replay.html``, ``report.html`` and ``ground_truth.tum`` there. ``realtime_rate``: 0 runs as
     fast as possible, 1.0 paces the simulation to the wall clock (for watching live).
 
-    A fleet scenario (controller ``taxi``) runs :func:`usvdrake.fleet.run_fleet_mission`: its
+    A fleet scenario (controller ``taxi``) runs :func:`usvdrake.run.fleet.run_fleet_mission`: its
     result has the service metrics and one track per boat (``tracks``) instead of ``states``.
     """
     if scenario.controller == "taxi":
-        from usvdrake.fleet import run_fleet_mission
-
         return run_fleet_mission(scenario, out_dir, meshcat, record, progress, realtime_rate)
     vessel = load_vessel(scenario.vessel)
     world = make_world(scenario.world, scenario.seed)
@@ -248,8 +147,6 @@ def run_mission(
         logger.set_name(f"log_{name}")
     log_writer = None
     if out_dir is not None:
-        from usvdrake.logs.mission_log import MissionLogWriter, add_mission_recorder
-
         Path(out_dir).mkdir(parents=True, exist_ok=True)
         # written while the simulation runs (flushed every 0.5 s): a crash keeps all but ~1 s
         log_writer = MissionLogWriter(Path(out_dir) / "log.mcap")
@@ -263,16 +160,16 @@ def run_mission(
             set_visualizations_while_recording=True,
         )
     try:
-        simulator, t, complete, wall = simulate_until(
+        outcome = simulate(
             diagram,
-            scenario,
+            scenario.duration,
             vessel_diagram,
-            "mission_complete",
-            "mission complete",
+            settings=scenario.simulation,
             realtime_rate=realtime_rate,
             progress=progress,
         )
-        context = simulator.get_context()
+        t, complete, wall = outcome.sim_time, outcome.done, outcome.wall_time
+        context = outcome.simulator.get_context()
         vessel_context = vessel_diagram.GetMyContextFromRoot(context)
     finally:  # an interrupted or failed run still leaves a finished, readable log
         if log_writer is not None:
@@ -354,8 +251,6 @@ def run_mission(
             meshcat.PublishRecording()
             (out / "replay.html").write_text(meshcat.StaticHtml())
             result.files["replay"] = out / "replay.html"
-        from usvdrake.viz.report import write_report
-
         write_report(
             out / "report.html",
             f"usvdrake run {scenario.name}",
@@ -368,7 +263,7 @@ def run_mission(
             world,
             scenario.mission.waypoints,
         )
-        _write_tum(out / "ground_truth.tum", times, states)
+        write_tum(out / "ground_truth.tum", times, states)
         (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
         (out / "diagram.dot").write_text(vessel_diagram.GetGraphvizString(max_depth=2))
         result.files.update(

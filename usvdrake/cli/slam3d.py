@@ -1,0 +1,80 @@
+"""``usvdrake slam3d``: lidar-IMU-GPS factor-graph SLAM (000 §V) on a recording."""
+
+import json
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+from usvdrake.diagrams import load_scenario
+from usvdrake.diagrams.slam import settings_from_scenario
+from usvdrake.errors import ConfigError
+from usvdrake.run.slam3d import run_slam3d, variant_config, write_keyframes_tum
+from usvdrake.scenario import Scenario
+
+
+def slam3d_settings(scenario=None):
+    """(config, mount, datum) of a scenario's (a Scenario, name or YAML path) factor-graph SLAM;
+    None: the scenario defaults (``slam.factor_graph``, the GPS antenna height, the 3D lidar's
+    mount) and the datum ``amsterdam``."""
+    if scenario is None:
+        s = Scenario()
+        config = replace(s.slam.factor_graph, gps_antenna_height=s.sensors.gps.antenna_height)
+        return config, list(s.sensors.lidar3d.mount), "amsterdam"
+    if not isinstance(scenario, Scenario):
+        scenario = load_scenario(scenario)
+    if scenario.slam.method != "factor_graph":
+        raise ConfigError(scenario.name, "slam.method", "factor_graph", repr(scenario.slam.method))
+    return settings_from_scenario(scenario)
+
+
+def add_arguments(s3) -> None:
+    s3.add_argument("log", help="mission log (.mcap or run folder), ROS 1 .bag or ROS 2 bag folder")
+    s3.add_argument("--out", default=None, help="write metrics.json and trajectory.tum here")
+    s3.add_argument("--lidar-topic", default=None, help="PointCloud2 / /lidar_points topic")
+    s3.add_argument("--imu-topic", default=None, help="Imu / /imu topic")
+    s3.add_argument("--gps-topic", default=None, help="NavSatFix / /gps topic")
+    s3.add_argument(
+        "--datum", default=None, help="origin of the world ENU frame (default: amsterdam)"
+    )
+    s3.add_argument(
+        "--scenario",
+        default=None,
+        help="take the SLAM config, lidar mount and datum from this scenario (default: defaults)",
+    )
+    s3.add_argument("--no-gps", action="store_true", help="no GPS factors")
+    s3.add_argument("--no-loop", action="store_true", help="no loop closures")
+    s3.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def run(args) -> int:
+    """000 §V's lidar-IMU-GPS SLAM on a recording: metrics JSON to stdout; with --out,
+    DIR/metrics.json and DIR/trajectory.tum (keyframes, final estimates)."""
+    if not Path(args.log).exists():
+        raise ConfigError(
+            args.log, "", "a mission log (.mcap or run folder) or a ROS 1/2 bag", "no such file"
+        )
+    config, mount, datum = slam3d_settings(args.scenario)
+    config = variant_config(
+        config,
+        config.graph.use_gps and not args.no_gps,
+        config.graph.use_loop_closure and not args.no_loop,
+    )
+    result = run_slam3d(
+        args.log,
+        config,
+        mount=mount,
+        datum=args.datum or datum,
+        progress=not args.quiet,
+        lidar_topic=args.lidar_topic,
+        imu_topic=args.imu_topic,
+        gps_topic=args.gps_topic,
+    )
+    text = json.dumps(result.metrics, indent=2)
+    print(text)
+    if args.out:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "metrics.json").write_text(text + "\n")
+        write_keyframes_tum(out / "trajectory.tum", result)
+        print(f"  metrics.json, trajectory.tum in {out}", file=sys.stderr)
+    return 0

@@ -1,0 +1,137 @@
+"""Links and loop closure of :class:`GraphSlam` (:class:`LoopMixin`): the node positions'
+array the candidates are searched in, the loop candidates (optionally one per pass), the
+submaps of neighbouring scans and :meth:`_link`, which matches a new node to an older one
+(PLICP, after a correlative search for loops with ``loop_linear_window``) and adds the
+constraint if the match passes the link or loop checks.
+"""
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from usvdrake.systems.slam.correlative import LikelihoodField, correlative_match
+from usvdrake.systems.slam.graph_slam.graph import Constraint
+from usvdrake.systems.slam.graph_slam.poses import between
+from usvdrake.systems.slam.plicp import plicp, rot
+
+
+class LoopMixin:
+    """Dense links and loop closures of :class:`GraphSlam`."""
+
+    def _sync_xy(self, changed=()) -> None:
+        """Bring the node positions' array up to date: rows for the nodes added since (by
+        ``_add_node`` or behind its back), and the nodes ``changed`` that got a new pose. The
+        loop candidates' search reads it instead of gathering every node's pose per new node."""
+        n = len(self._xy)
+        if n < len(self.nodes):
+            self._xy = np.vstack([self._xy, [node.pose[:2] for node in self.nodes[n:]]])
+        if len(changed):
+            self._xy[list(changed)] = [self.nodes[k].pose[:2] for k in changed]
+
+    def _loop_candidates(self, k: int) -> list[int]:
+        """Older nodes (index gap > ``loop_index_gap``) within ``loop_radius`` of node k; with
+        ``loop_per_chain``, only the nearest of each run of consecutive such nodes (one pass
+        of the vessel), at most ``loop_max_chains`` of them, nearest first."""
+        return self._near(
+            k,
+            self.cfg.loop_index_gap,
+            self.cfg.loop_radius,
+            self.cfg.loop_max_chains if self.cfg.loop_per_chain else None,
+        )
+
+    def _near(self, k: int, gap: int, radius: float, chains: int | None) -> list[int]:
+        """Nodes whose index is more than ``gap`` below k within ``radius`` [m] of node k; with
+        ``chains``, only the nearest of each run of consecutive such nodes (one pass of the
+        vessel), at most ``chains`` of them, nearest first."""
+        old = np.arange(max(0, k - gap))
+        if not len(old):
+            return []
+        self._sync_xy()
+        d = np.hypot(*(self._xy[old] - self.nodes[k].pose[:2]).T)
+        near = old[d <= radius]
+        if chains is None or not len(near):
+            return list(near)
+        runs = np.split(near, np.flatnonzero(np.diff(near) > 1) + 1)
+        best = [int(run[np.argmin(d[run])]) for run in runs]
+        best.sort(key=lambda i: d[i])
+        return best[:chains]
+
+    def _submap(self, k: int, indices) -> np.ndarray:
+        """The scans of the nodes ``indices`` (those that exist) in node k's frame."""
+        base = self.nodes[k].pose
+        parts = []
+        for j in indices:
+            if 0 <= j < len(self.nodes):
+                x, y, th = between(base, self.nodes[j].pose)
+                parts.append(self.nodes[j].points @ rot(th).T + (x, y))
+        return np.vstack(parts)
+
+    def _link(self, i: int, k: int, robust: bool, kind: str, search: bool = False) -> bool:
+        a, b = self.nodes[i], self.nodes[k]
+        guess = between(a.pose, b.pose)
+        rotation_search, pairing = search, 1.0  # PLICP's own rotation search, default pairing
+        reference, tree, searched = a.points, a.tree, False
+        if search and self.cfg.loop_linear_window > 0:
+            h = self.cfg.loop_submap
+            submap = self._submap(i, range(i - h, i + h + 1))
+            candidate = LikelihoodField.build(
+                submap,
+                self.cfg.search_resolution,
+                self.cfg.search_sigma,
+                margin=self.cfg.loop_linear_window + 1.0,
+            )
+            match = correlative_match(
+                candidate,
+                self._submap(k, range(k - h, k + 1)),
+                guess,
+                self.cfg.loop_linear_window,
+                self.cfg.loop_angular_window,
+                distinct=self.cfg.loop_distinct,
+                # only whether a rival comes that close matters, not its exact score
+                rival_above=min(max(self.cfg.max_loop_ambiguity, 0.0), 1.0),
+            )
+            guess = match.pose
+            # a weak fit, or one the scene repeats (a corridor): not a loop
+            if (
+                match.score < self.cfg.min_loop_score
+                or match.runner_up > self.cfg.max_loop_ambiguity * match.score
+            ):
+                self.stats["failed_matches"] += 1
+                return False
+            if self.cfg.loop_rematch_window > 0:
+                guess = correlative_match(
+                    candidate,
+                    b.points,
+                    guess,
+                    self.cfg.loop_rematch_window,
+                    self.cfg.loop_rematch_angle,
+                ).pose
+            rotation_search, pairing, searched = False, self.cfg.refine_max_distance, True
+            if self.cfg.loop_refine_submap:
+                # the new scan refined against the candidate's whole submap (each of its scans
+                # in beam order, so PLICP's scan-order neighbours stay on one scan; the jumps
+                # between scans exceed max_segment): far more overlap than its single scan
+                reference, tree = submap, cKDTree(submap)
+        res = plicp(
+            reference,
+            b.points,
+            initial=tuple(guess),
+            tree=tree,
+            rotation_search=rotation_search,
+            max_distance=pairing,
+        )
+        loop = kind == "loop"
+        need = self.cfg.min_loop_points if loop else self.cfg.min_link_points
+        limit = self.cfg.max_loop_residual if loop else self.cfg.max_link_residual
+        # a searched loop starts in the right basin: PLICP cycling between two correspondence
+        # sets at the end (not converged) still leaves a good pose, which the residual checks
+        settled = res.converged or (searched and self.cfg.loop_refine_submap)
+        if not (settled and res.n_valid >= need and res.residual <= limit):
+            self.stats["failed_matches"] += 1
+            return False
+        z = res.pose
+        # (against a submap, Censi's covariance takes every reference point's range noise along
+        # its bearing from node i, though its neighbours' points were ranged from elsewhere)
+        self.constraints.append(
+            Constraint(i, k, z, self._covariance(reference, b.points, res), robust, kind)
+        )
+        return True
