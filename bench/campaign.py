@@ -23,8 +23,8 @@ import json
 import os
 import statistics
 
-from usvdrake.run.campaign import is_timing_key, run_campaign
 from usvdrake.diagrams import load_scenario
+from usvdrake.run.campaign import is_timing_key, run_campaign
 
 TARGET_RATIO = 0.6
 

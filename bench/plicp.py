@@ -18,8 +18,8 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
-from usvdrake.worlds.raycast import Scene, cast
 from usvdrake.systems.slam.plicp import plicp, rot
+from usvdrake.worlds.raycast import Scene, cast
 from usvdrake.worlds.synthetic import HOKUYO, cluttered_room
 
 

@@ -1,4 +1,5 @@
-"""Monte Carlo campaigns (usvdrake.run.campaign): randomisation, Dask runs, failures, reproducibility,
+"""Monte Carlo campaigns (usvdrake.run.campaign): randomisation, Dask runs, failures,
+reproducibility,
 and the plant-only model error behind them."""
 
 import dataclasses
@@ -10,6 +11,9 @@ import pytest
 
 import usvdrake.run.campaign as campaign_mod
 import usvdrake.run.mission
+from usvdrake.cli import main
+from usvdrake.diagrams import check_scenario, load_scenario, with_overrides
+from usvdrake.diagrams.vessel_diagram import build_vessel_diagram
 from usvdrake.run.campaign import (
     RANGES,
     _dask_client,
@@ -18,10 +22,7 @@ from usvdrake.run.campaign import (
     randomise,
     run_campaign,
 )
-from usvdrake.cli import main
-from usvdrake.diagrams.vessel_diagram import build_vessel_diagram
 from usvdrake.run.mission import run_mission
-from usvdrake.diagrams import check_scenario, load_scenario, with_overrides
 from usvdrake.typed_yaml import ConfigError
 from usvdrake.vessel import load_vessel
 from usvdrake.worlds import make_world

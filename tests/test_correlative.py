@@ -3,7 +3,6 @@
 import numpy as np
 import pytest
 
-from usvdrake.worlds.raycast import cast
 from usvdrake.systems.slam.correlative import (
     LikelihoodField,
     correlative_match,
@@ -12,6 +11,7 @@ from usvdrake.systems.slam.correlative import (
     match_covariance,
 )
 from usvdrake.systems.slam.plicp import plicp
+from usvdrake.worlds.raycast import cast
 from usvdrake.worlds.synthetic import HOKUYO, cluttered_room
 
 

@@ -11,7 +11,6 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource
 
 from usvdrake.diagrams import check_scenario, load_scenario
-
 from usvdrake.scenario import ConfigError
 from usvdrake.sensors.messages import LaserScan
 from usvdrake.systems.guidance.astar_planner import AStarPlanner

@@ -9,12 +9,11 @@ import pytest
 import shapely
 from pydrake.systems.analysis import Simulator
 
-from usvdrake.diagrams.fleet_diagram import build_fleet_diagram
 from usvdrake.diagrams import load_scenario
+from usvdrake.diagrams.fleet_diagram import build_fleet_diagram
 from usvdrake.scenario import FleetVesselConfig, RequestConfig
 from usvdrake.sensors.lidar3d import Lidar3D
 from usvdrake.sensors.lidar_model import LidarConfig, sensor_to_world
-from usvdrake.worlds.raycast import Scene
 from usvdrake.sensors.sampled_lidar import OtherVessels
 from usvdrake.systems.guidance.coordinator import Coordinator
 from usvdrake.systems.guidance.fleet_assignment import (
@@ -32,6 +31,7 @@ from usvdrake.systems.guidance.taxi_planning import (
     path_conflicts,
 )
 from usvdrake.worlds import make_world
+from usvdrake.worlds.raycast import Scene
 from usvdrake.worlds.solids import box
 from usvdrake.worlds.world import OccupancyGrid
 

@@ -8,7 +8,6 @@ import pytest
 from scipy.spatial import cKDTree
 
 from usvdrake.sensors.lidar_model import LidarConfig, LidarModel, preset_by_name
-from usvdrake.worlds.raycast import cast
 from usvdrake.systems.slam.graph_slam import (
     GraphSlam,
     GraphSlamConfig,
@@ -18,6 +17,7 @@ from usvdrake.systems.slam.graph_slam import (
     odometry_covariance,
 )
 from usvdrake.worlds import box, cylinder
+from usvdrake.worlds.raycast import cast
 from usvdrake.worlds.synthetic import HOKUYO, cluttered_room
 from usvdrake.worlds.world import World
 

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from usvdrake.cli import main as cli_main
-from usvdrake.run.hil import run_hil, truth_on_host_clock, watchdog_latency_ms
-from usvdrake.logs.mission_log import log_summary, read_log_vectors, read_mission_log
 from usvdrake.diagrams import load_scenario
+from usvdrake.logs.mission_log import log_summary, read_log_vectors, read_mission_log
+from usvdrake.run.hil import run_hil, truth_on_host_clock, watchdog_latency_ms
 
 
 def test_truth_is_put_on_the_host_clock_through_wall_time():

@@ -122,8 +122,8 @@ def test_sun_glare_false_returns_only_towards_the_sun():
 
 @pytest.fixture(scope="module")
 def short_survey(tmp_path_factory):
-    from usvdrake.run.mission import run_mission
     from usvdrake.diagrams import load_scenario, with_overrides
+    from usvdrake.run.mission import run_mission
 
     scenario = with_overrides(load_scenario("canal_survey"), duration=25.0)
     return run_mission(scenario, out_dir=tmp_path_factory.mktemp("survey"), record=False)

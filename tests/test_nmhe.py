@@ -19,10 +19,10 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, Sine
 
 from usvdrake.sensors.imu import Imu
-from usvdrake.systems.estimation.imu_interval import ImuIntervalMean
 from usvdrake.sensors.imu_model import ImuConfig
 from usvdrake.sensors.pose_sensor import PoseSensor, PoseSensorConfig, measure_pose, wrap_angle
 from usvdrake.sensors.thrust_sensor import ThrustSensor, ThrustSensorConfig, thrust_noise_scale
+from usvdrake.systems.estimation.imu_interval import ImuIntervalMean
 from usvdrake.systems.estimation.nmhe_model import NmheConfig, _thrust_model
 from usvdrake.systems.estimation.nmhe_problem import NmheProblem
 from usvdrake.systems.estimation.nmhe_system import Nmhe

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from test_nmhe import DT, build_diagram, rmse, run_diagram, truth_at
 
-from usvdrake.systems.estimation.imu_interval import NAN_MEAN, interval_mean_step, level_imu
 from usvdrake.sensors.imu_model import specific_force
 from usvdrake.sensors.messages import ImuSample
+from usvdrake.systems.estimation.imu_interval import NAN_MEAN, interval_mean_step, level_imu
 from usvdrake.systems.estimation.nmhe_model import NmheConfig, imu_interval_model
 from usvdrake.systems.estimation.nmhe_problem import NmheProblem
 from usvdrake.vessel import load_vessel

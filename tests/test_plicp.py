@@ -3,10 +3,10 @@
 import numpy as np
 from scipy.optimize import least_squares
 
-from usvdrake.worlds.raycast import Scene, cast
 from usvdrake.systems.slam.censi_covariance import plicp_covariance, plicp_hessians
 from usvdrake.systems.slam.plicp import line_normals, plicp, rot, solve_point_to_line
 from usvdrake.worlds import box
+from usvdrake.worlds.raycast import Scene, cast
 from usvdrake.worlds.synthetic import HOKUYO, cluttered_room
 
 

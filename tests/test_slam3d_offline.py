@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from usvdrake.cli import main
+from usvdrake.diagrams import load_scenario, with_overrides
 from usvdrake.logs.mission_log import read_log_vectors
 from usvdrake.logs.sensor_stream import SensorMessage
 from usvdrake.run.mission import run_mission
-from usvdrake.diagrams import load_scenario, with_overrides
 from usvdrake.run.slam3d import (
     _ticks,
     ablation,

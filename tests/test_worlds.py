@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 import shapely
 
+from usvdrake.errors import ConfigError
 from usvdrake.worlds import available_worlds, make_world
 from usvdrake.worlds.canal import amsterdam_canal_lines, canal_network, centre_line_length
 
@@ -83,8 +84,9 @@ def test_worlds_are_seeded():
 
 
 def test_unknown_world_is_one_clear_line():
-    with pytest.raises(KeyError, match="amsterdam_canals"):
+    with pytest.raises(ConfigError, match="amsterdam_canals") as err:
         make_world("atlantis")
+    assert "\n" not in str(err.value) and "'atlantis'" in str(err.value)
     assert "canal_demo" in available_worlds()
 
 

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from usvdrake.worlds.raycast import ColumnLayout, _pairs, cast
 from usvdrake.worlds.basin import BEACH_SLOPE, LENGTH, START, WIDTH, ntnu_basin
 from usvdrake.worlds.natural import phu_tho_lake, valley
+from usvdrake.worlds.raycast import ColumnLayout, _pairs, cast
 
 GENERATORS = [ntnu_basin, valley, phu_tho_lake]
 KINDS = {"wall", "bank", "rock", "tree", "bush", "leaf", "boat", "plank", "mount"}

@@ -70,9 +70,6 @@ class SimulationConfig:
     max_step: float = 0.1  # [s] largest integrator step
 
 
-SENSORS = ("lidar2d", "lidar3d", "imu", "gps", "pose")
-
-
 @dataclass
 class SensorsConfig:
     # Which sensors the station carries (exports as ports): any of lidar2d, lidar3d, imu, gps,
@@ -338,11 +335,6 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
             "one of " + ", ".join(integrators),
             repr(s.simulation.integrator),
         )
-    for i, name in enumerate(s.sensors.enabled):
-        if name not in SENSORS:
-            raise ConfigError(
-                file, f"sensors.enabled[{i}]", "one of " + ", ".join(SENSORS), repr(name)
-            )
     for key, dims in (("lidar2d", 1), ("lidar3d", 2)):
         cfg = getattr(s.sensors, key)
         if cfg.preset not in LIDAR_PRESETS:

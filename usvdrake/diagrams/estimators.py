@@ -45,7 +45,7 @@ def add_nmhe(parts: AutonomyParts):
         )
         builder.ExportInput(imu_mean.GetInputPort("imu"), "imu")
         builder.Connect(imu_mean.GetOutputPort("imu_mean"), nmhe.GetInputPort("imu_mean"))
-    for port in ("nmhe_failures", "nmhe_solve_ms", "estimate_time"):
+    for port in ("nmhe_failures", "nmhe_solve_ms", "estimate_time", "nmhe_diagnostics"):
         builder.ExportOutput(nmhe.GetOutputPort(port), port)
     parts.disturbance_estimate = nmhe.GetOutputPort("tau_env_estimate")
     return nmhe.GetOutputPort("state_estimate")

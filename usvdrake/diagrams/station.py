@@ -10,12 +10,8 @@ import dataclasses
 import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder
 
+from usvdrake.diagrams.sensors import SENSORS
 from usvdrake.scenario import Scenario
-from usvdrake.sensors.gps import Gps
-from usvdrake.sensors.imu import Imu
-from usvdrake.sensors.lidar2d import Lidar2D
-from usvdrake.sensors.lidar3d import Lidar3D
-from usvdrake.sensors.pose_sensor import PoseSensor
 from usvdrake.sensors.sampled_lidar import OtherVessels
 from usvdrake.sensors.thrust_sensor import ThrustSensor, thrust_noise_scale
 from usvdrake.systems.vessel.environment import Environment
@@ -54,18 +50,20 @@ def make_sim_station(scenario: Scenario, vessel: VesselParams, world: World) -> 
     others = fleet_others(scenario, vessel)
     others_exported = False
     for name in sensors.enabled:
-        system, port = _make_sensor(name, scenario, world, others)
-        add_state_sensor(builder, system, state, port)
+        sensor = SENSORS.get(name)
+        system = builder.AddNamedSystem(sensor.system, sensor.make(scenario, world, others))
+        builder.Connect(state, system.GetInputPort("state"))
+        builder.ExportOutput(system.GetOutputPort(sensor.port), sensor.port)
+        if system.HasInputPort("acceleration"):  # the IMU measures the plant's acceleration
+            builder.Connect(
+                plant.GetOutputPort("acceleration"), system.GetInputPort("acceleration")
+            )
         if others is not None and system.HasInputPort("other_vessels"):
             if others_exported:  # a second lidar sees them too
                 builder.ConnectInput("other_vessels", system.GetInputPort("other_vessels"))
             else:
                 builder.ExportInput(system.GetInputPort("other_vessels"), "other_vessels")
                 others_exported = True
-        if name == "imu":
-            builder.Connect(
-                plant.GetOutputPort("acceleration"), system.GetInputPort("acceleration")
-            )
 
     builder.ExportInput(mixer.GetInputPort("thruster_command"), "thruster_command")
     builder.ExportOutput(mixer.GetOutputPort("thrust_applied"), "thrust_applied")
@@ -96,49 +94,3 @@ def fleet_others(scenario: Scenario, vessel: VesselParams) -> OtherVessels | Non
         return None
     hull = vessel.hull
     return OtherVessels(count, hull.length, hull.beam, -hull.draught, 1.5)
-
-
-def _make_sensor(name: str, scenario: Scenario, world: World, others=None):
-    """(system, output port name) of an enabled sensor, named as the station shows it;
-    ``others``: the fleet's other boats, seen by the lidars."""
-    sensors, seed = scenario.sensors, scenario.seed
-    if name == "lidar2d":
-        return Lidar2D(sensors.lidar2d, world.scene, seed, others=others), "lidar_scan"
-    if name == "lidar3d":
-        return Lidar3D(sensors.lidar3d, world.scene, seed, others=others), "lidar_points"
-    if name == "imu":
-        return Imu(sensors.imu, seed), "imu"
-    if name == "pose":
-        return PoseSensor(sensors.pose, seed), "pose_measurement"
-    if name == "gps":
-        cfg = (
-            sensors.gps
-            if sensors.gps.datum
-            else dataclasses.replace(sensors.gps, datum=world.datum)
-        )
-        antenna = cfg.antenna_height
-        gps = Gps(
-            cfg,
-            seed,
-            denied=lambda x, y: bool(world.gps_denied_at(x, y)),
-            sky_blocked=lambda x, y: world.sky_blocked(x, y, antenna),
-        )
-        return gps, "gps"
-    raise ValueError(f"station: unknown sensor {name!r}")
-
-
-SYSTEM_NAMES = {
-    "lidar_scan": "lidar_2d",
-    "lidar_points": "lidar_3d",
-    "imu": "imu",
-    "gps": "gps",
-    "pose_measurement": "pose_sensor",
-}
-
-
-def add_state_sensor(builder: DiagramBuilder, system, state_port, port: str):
-    """Add a sensor that reads the vessel's ``state``, and export its output ``port``."""
-    builder.AddNamedSystem(SYSTEM_NAMES.get(port, port), system)
-    builder.Connect(state_port, system.GetInputPort("state"))
-    builder.ExportOutput(system.GetOutputPort(port), port)
-    return system

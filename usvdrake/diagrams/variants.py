@@ -18,6 +18,7 @@ from typing import Any
 from pydrake.systems.framework import DiagramBuilder, OutputPort
 from pydrake.systems.primitives import PassThrough
 
+from usvdrake.diagrams.sensors import SENSORS
 from usvdrake.errors import ConfigError
 from usvdrake.registry import Registry
 from usvdrake.scenario import Scenario
@@ -92,8 +93,10 @@ class AutonomyParts:
 
 
 def check_variants(s: Scenario, file: str = "scenario") -> Scenario:
-    """The checks of the scenario's chosen estimator, controller and SLAM method (names must be
-    registered). Returns ``s`` unchanged."""
+    """The checks of the scenario's chosen sensors, estimator, controller and SLAM method (names
+    must be registered). Returns ``s`` unchanged."""
+    for i, name in enumerate(s.sensors.enabled):
+        SENSORS.get(name, file, f"sensors.enabled[{i}]")
     controller = CONTROLLERS.get(s.controller, file)
     estimator = ESTIMATORS.get(s.estimator, file)
     slam = SLAM_METHODS.get(s.slam.method, file)

@@ -297,7 +297,7 @@ def _truth_metrics(scenario, vessel, context, logs, keep, times, states, report)
     nmhe_ms = logged("nmhe_solve_ms")
     est_time = logged("estimate_time")
     out = control_estimation_metrics(
-        vessel.GetSubsystemByName("autonomy"),
+        vessel,
         context,
         times,
         states,

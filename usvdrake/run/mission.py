@@ -65,35 +65,38 @@ def _exploration_summary(
 
 
 def control_estimation_metrics(
-    autonomy, context, times, states, estimates, pose=None, nmhe_solve_ms=None, estimate_times=None
+    vessel, context, times, states, estimates, pose=None, nmhe_solve_ms=None, estimate_times=None
 ) -> dict:
-    """NMPC tracking RMSE and solve statistics, NMHE estimation errors and solve times, for the
-    systems ``autonomy`` holds (empty if neither). ``times``/``states``: ground truth samples;
-    ``estimates``: the logged ``state_estimate`` at those times; ``pose``: the logged pose
-    measurements; ``nmhe_solve_ms``: the logged ``nmhe_solve_ms`` output; ``estimate_times``:
-    the logged ``estimate_time`` (the instant each estimate refers to)."""
+    """NMPC tracking RMSE and solve statistics, NMHE estimation errors and solve times, read off
+    the vessel diagram's exported diagnostics ports (empty if it has neither). ``times``/
+    ``states``: ground truth samples; ``estimates``: the logged ``state_estimate`` at those
+    times; ``pose``: the logged pose measurements; ``nmhe_solve_ms``: the logged
+    ``nmhe_solve_ms`` output; ``estimate_times``: the logged ``estimate_time`` (the instant
+    each estimate refers to)."""
     out = {}
-    if autonomy.HasSubsystemNamed("nmpc"):
-        nmpc = autonomy.GetSubsystemByName("nmpc")
-        memory = nmpc.memory(nmpc.GetMyContextFromRoot(context))
-        solve_ms = memory.solve_ms if len(memory.solve_ms) else np.zeros(1)
-        out.update(tracking_metrics(times, states, nmpc.reference))
-        out.update(
-            nmpc_failures=int(memory.failures),
-            nmpc_solves=len(memory.solve_ms),
-            nmpc_solve_ms_median=float(np.median(solve_ms)),
-            nmpc_solve_ms_p95=float(np.percentile(solve_ms, 95)),
+    vessel_context = vessel.GetMyContextFromRoot(context)
+    if vessel.HasOutputPort("nmpc_diagnostics"):
+        solves, failures, median, p95 = vessel.GetOutputPort("nmpc_diagnostics").Eval(
+            vessel_context
         )
-    if autonomy.HasSubsystemNamed("nmhe"):
+        if vessel.HasOutputPort("reference_track"):
+            reference = vessel.GetOutputPort("reference_track").Eval(vessel_context)
+            out.update(tracking_metrics(times, states, reference))
+        out.update(
+            nmpc_failures=int(failures),
+            nmpc_solves=int(solves),
+            nmpc_solve_ms_median=float(median),
+            nmpc_solve_ms_p95=float(p95),
+        )
+    if vessel.HasOutputPort("nmhe_diagnostics"):
         out.update(estimation_metrics(times, states, estimates, pose, estimate_times))
-        nmhe = autonomy.GetSubsystemByName("nmhe")
-        diag = nmhe.diagnostics(nmhe.GetMyContextFromRoot(context))
+        diag = vessel.GetOutputPort("nmhe_diagnostics").Eval(vessel_context)
         ms = np.zeros(0) if nmhe_solve_ms is None else np.asarray(nmhe_solve_ms)
         ms = ms[ms > 0]
         out.update(
-            nmhe_failures=diag["failures"],
+            nmhe_failures=int(diag[0]),
             nmhe_solve_ms_median=float(np.median(ms)) if len(ms) else 0.0,
-            nmhe_solve_ms_max=diag["max_ms"],
+            nmhe_solve_ms_max=float(diag[3]),
         )
     return out
 
@@ -204,10 +207,9 @@ def run_mission(
         mission_metrics(times, states, reference, thrust, vessel, world, goals, clearance)
     )
 
-    autonomy = vessel_diagram.GetSubsystemByName("autonomy")
     metrics.update(
         control_estimation_metrics(
-            autonomy,
+            vessel_diagram,
             context,
             times,
             states,
@@ -218,6 +220,7 @@ def run_mission(
         )
     )
 
+    autonomy = vessel_diagram.GetSubsystemByName("autonomy")
     if autonomy.HasSubsystemNamed("lidar_slam_2d"):
         slam_sys = autonomy.GetSubsystemByName("lidar_slam_2d")
         slam = slam_sys.slam(slam_sys.GetMyContextFromRoot(context))

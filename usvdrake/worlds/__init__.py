@@ -4,6 +4,7 @@ from collections.abc import Callable
 
 import shapely
 
+from usvdrake.registry import Registry
 from usvdrake.worlds.basin import ntnu_basin
 from usvdrake.worlds.canal import amsterdam_canals, canal_demo, charles_river
 from usvdrake.worlds.natural import phu_tho_lake, valley
@@ -22,25 +23,22 @@ def open_water(seed: int = 0) -> World:
     )
 
 
-WORLDS: dict[str, Callable[[int], World]] = {
-    "amsterdam_canals": amsterdam_canals,
-    "canal_demo": canal_demo,
-    "charles_river": charles_river,
-    "ntnu_basin": ntnu_basin,
-    "open_water": open_water,
-    "phu_tho_lake": phu_tho_lake,
-    "valley": valley,
-}
+# A world is a seeded generator ``(seed) -> World``; a new one is registered by name
+# (``WORLDS.register("harbour", harbour)``) and a scenario's ``world:`` can then name it.
+WORLDS: Registry[Callable[[int], World]] = Registry("world")
+for _make in (
+    amsterdam_canals, canal_demo, charles_river, ntnu_basin, open_water, phu_tho_lake, valley
+):  # fmt: skip
+    WORLDS.register(_make.__name__, _make)
 
 
 def available_worlds() -> list[str]:
-    return sorted(WORLDS)
+    return WORLDS.names()
 
 
 def make_world(name: str, seed: int = 0) -> World:
-    if name not in WORLDS:
-        raise KeyError(f"unknown world {name!r}; expected one of {', '.join(available_worlds())}")
-    return WORLDS[name](seed)
+    """The world ``name`` built with ``seed``; an unknown name is a one-line ConfigError."""
+    return WORLDS.get(name, "world", "world")(seed)
 
 
 __all__ = [

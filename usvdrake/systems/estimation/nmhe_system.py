@@ -106,6 +106,8 @@ class Nmhe(LeafSystem):
             "nmhe_solve_ms", 1, self._calc_solve_ms, prerequisites_of_calc=diag_ticket
         )
         self.DeclareStateOutputPort("estimate_time", self._est_time)
+        # [failures, solves, last ms, max ms, total ms, update events]: what metrics report
+        self.DeclareStateOutputPort("nmhe_diagnostics", self._diag)
 
     @property
     def problem(self) -> NmheProblem:
