@@ -75,7 +75,7 @@ def test_ntnu_round_geometry():
             "sensors.lidar3d.preset",
             "a 3D lidar",
         ),
-        (GOOD + "sensors: {enabled: [sonar]}\n", "sensors.enabled[0]", "one of lidar2d"),
+        (GOOD + "sensors: {enabled: [sonar]}\n", "sensors.enabled[0]", "one of gps, imu, lidar2d"),
         (GOOD + "sensors: {gps: {datum: mars}}\n", "sensors.gps.datum", "one of"),
         (GOOD.replace("[[10.0, 0.0]]", "[[30.0, 7.5]]"), "mission.waypoints[0]", "free water"),
         (GOOD + "initial_state: [30, -20, 0, 0, 0, 0]\n", "initial_state", "free water"),
