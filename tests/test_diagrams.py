@@ -26,6 +26,28 @@ def test_station_ports():
     outs = {full.get_output_port(i).get_name() for i in range(full.num_output_ports())}
     expected = {"thrust_measured", "thrust_applied", "ground_truth_state"}
     assert outs == expected | {"lidar_scan", "lidar_points", "imu", "gps"}
+    # each sensor's system is named by its one name
+    assert {"lidar2d", "lidar3d", "imu", "gps"} <= {x.get_name() for x in full.GetSystems()}
+
+
+def test_devices_share_the_sensor_names_and_ports():
+    from usvdrake.diagrams import DEVICES
+    from usvdrake.diagrams.hardware_station import port_devices, station_ports_for
+    from usvdrake.diagrams.sensors import SENSORS
+    from usvdrake.scenario import HardwareConfig, SerialDeviceConfig
+
+    assert DEVICES.names() == ["gps", "imu", "lidar2d", "lidar3d"]
+    assert all(DEVICES.get(n).port == SENSORS.get(n).port for n in DEVICES)
+    assert port_devices() == {
+        "gps": ("gps",),
+        "imu": ("imu",),
+        "lidar_scan": ("lidar2d",),
+        "lidar_points": ("lidar3d",),
+        "pose_measurement": ("gps", "imu"),
+    }
+    hw = HardwareConfig(gps=SerialDeviceConfig("/dev/gps"), imu=SerialDeviceConfig("/dev/imu"))
+    assert [n for n in DEVICES if DEVICES.get(n).fitted(hw)] == ["gps", "imu"]
+    assert station_ports_for(hw) == ["gps", "imu", "pose_measurement"]
 
 
 def test_vessel_diagram_structure_reads_like_the_picture():
@@ -60,7 +82,9 @@ def test_vessel_diagram_structure_reads_like_the_picture():
 
 def test_hardware_station_has_the_sim_station_ports_and_the_same_autonomy():
     from hardware_io.emulators.pty_link import PtyDevice
-    from usvdrake.diagrams.hardware_station import close_hardware
+    from hardware_io.systems.gps_serial_source import GpsSerialStatus
+    from hardware_io.systems.imu_serial_source import ImuSerialStatus
+    from usvdrake.diagrams.hardware_station import close_hardware, hardware_metrics
 
     s = load_scenario("river_tracking")
     devices = {name: PtyDevice() for name in ("thrusters", "gps", "imu")}
@@ -80,7 +104,14 @@ def test_hardware_station_has_the_sim_station_ports_and_the_same_autonomy():
 
         assert outputs(sim) - outputs(hard) == {"ground_truth_state", "thrust_applied"}
         # river_tracking simulates its IMU too (the NMHE reads it); the GPS only on the boat
-        assert outputs(hard) - outputs(sim) == {"gps", "watchdog_status", "thruster_link"}
+        assert outputs(hard) - outputs(sim) == {
+            "gps",
+            "watchdog_status",
+            "thruster_link",
+            "gps_diagnostics",
+            "imu_diagnostics",
+            "thruster_diagnostics",
+        }
 
         def autonomy(d):
             a = d.GetSubsystemByName("autonomy")
@@ -88,13 +119,33 @@ def test_hardware_station_has_the_sim_station_ports_and_the_same_autonomy():
 
         assert autonomy(hard) == autonomy(sim)
         station = hard.GetSubsystemByName("station")
+        # the devices are named by their sensor names, as in the simulated station
         assert {x.get_name() for x in station.GetSystems()} == {
             "thruster_serial_sink",
-            "gps_serial_source",
-            "imu_serial_source",
+            "gps",
+            "imu",
             "gnss_imu_pose",
             "watchdog",
         }
+        assert "imu" in {x.get_name() for x in sim.GetSubsystemByName("station").GetSystems()}
+
+        # the devices' counters, read off the diagnostics ports (nothing received yet)
+        metrics = hardware_metrics(hard, hard.CreateDefaultContext())
+        gps_keys = [f"gps_{f.name}" for f in dataclasses.fields(GpsSerialStatus)]
+        imu_keys = [f"imu_{f.name}" for f in dataclasses.fields(ImuSerialStatus)]
+        thruster_keys = [
+            f"thruster_{k}"
+            for k in (
+                "telemetry_frames",
+                "crc_errors",
+                "frame_errors",
+                "frames_sent",
+                "neutral_frames",
+                "stale_events",
+            )
+        ]
+        assert list(metrics) == gps_keys + imu_keys + thruster_keys
+        assert metrics["gps_bytes_read"] == metrics["thruster_frames_sent"] == 0
     finally:
         close_hardware(hard)
         for dev in devices.values():

@@ -1,5 +1,6 @@
 """GpsSerialSource on a pseudo-terminal fed with recorded NMEA captures."""
 
+import dataclasses
 import math
 import os
 import random
@@ -75,7 +76,11 @@ def _run(data: bytes):
             time.sleep(0.01)
         thread.join(timeout=5.0)
         sim.AdvanceTo(t + 0.1)  # everything read; one more update changes nothing
-        fix = system.get_output_port().Eval(ctx)
+        fix = system.GetOutputPort("gps").Eval(ctx)
+        # the counters on the diagnostics port, for runners (a flat dict of the status)
+        assert system.GetOutputPort("diagnostics").Eval(ctx) == dataclasses.asdict(
+            system.status(ctx)
+        )
         return fix, system.status(ctx)
     finally:
         system.close()

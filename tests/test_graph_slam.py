@@ -166,9 +166,11 @@ def test_final_trajectory_has_every_scan_and_copies_keep_their_own(noisy_loop):
 
 def test_final_ate_scores_the_body_not_the_lidar():
     """The backend's final trajectory is the lidar's (0.5 m ahead of the body on lake_survey);
-    with the mount, ``ate_final_m`` scores the body as ``ate_m`` does: a perfect SLAM is 0 m,
+    with the mount, the summary (the SLAM's ``slam_summary`` port) and ``ate_final_m`` score the
+    body as ``ate_m`` does: a perfect SLAM is 0 m,
     not the mount's lever arm."""
     from usvdrake.analysis.metrics import slam_metrics
+    from usvdrake.systems.slam.slam_summary import summarise_2d
 
     t = np.arange(0.0, 20.0, 0.1)
     truth = np.column_stack([np.cos(0.1 * t), np.sin(0.1 * t), 0.1 * t + np.pi / 2])
@@ -180,10 +182,10 @@ def test_final_ate_scores_the_body_not_the_lidar():
             return t, lidar
 
     states = np.column_stack([truth, np.zeros((len(t), 3))])
-    m = slam_metrics(t, states, truth, Backend(), mount=mount)
+    m = slam_metrics(t, states, truth, summarise_2d(Backend(), mount=mount))
     assert m["ate_m"] < 1e-12 and m["ate_final_m"] < 1e-12
     # without the mount the lever arm is all the error: the symptom on lake_survey
-    assert slam_metrics(t, states, truth, Backend())["ate_final_m"] == pytest.approx(
+    assert slam_metrics(t, states, truth, summarise_2d(Backend()))["ate_final_m"] == pytest.approx(
         np.hypot(0.5, 0.1)
     )
 

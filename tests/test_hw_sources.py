@@ -3,6 +3,7 @@ on pseudo-terminals / a UDP socket."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import socket
 import time
@@ -260,7 +261,7 @@ def test_imu_source_decodes_samples():
         def check(ctx):
             st = source.status(ctx)
             if st.samples:
-                out = source.get_output_port().Eval(ctx)
+                out = source.GetOutputPort("imu").Eval(ctx)
                 ref = sent[st.samples - 1]
                 assert np.array_equal(out.angular_velocity, _f32(ref.angular_velocity))
                 assert np.array_equal(out.linear_acceleration, _f32(ref.linear_acceleration))
@@ -270,11 +271,13 @@ def test_imu_source_decodes_samples():
         try:
             ctx = _run_serial(source, "imu", pty, dev, emit, 40, 0.01, check)
             st = source.status(ctx)
+            diagnostics = source.GetOutputPort("diagnostics").Eval(ctx)
         finally:
             source.close()
     assert st.requests_sent == 1 and dev.messages == 1  # GoToMeasurement reached the device
     assert st.samples >= 30 and st.samples == st.frames
     assert st.bad_frames == 0 and st.samples_lost == 0
+    assert diagnostics == dataclasses.asdict(st) and diagnostics["samples"] == st.samples
 
 
 def test_imu_source_survives_corruption():
@@ -289,7 +292,7 @@ def test_imu_source_survives_corruption():
                 150, 0.01,
             )  # fmt: skip
             st = source.status(ctx)
-            out = source.get_output_port().Eval(ctx)
+            out = source.GetOutputPort("imu").Eval(ctx)
         finally:
             source.close()
     assert faults.bytes_corrupted > 0
@@ -333,7 +336,7 @@ def test_lidar_source_decodes_scans(protocol):
         def check(ctx):
             st = source.status(ctx)
             if st.scans:
-                out = source.get_output_port().Eval(ctx)
+                out = source.GetOutputPort("lidar_scan").Eval(ctx)
                 check_scan(out, sent[st.scans - 1])
                 assert out.time >= 0 and abs(out.time / 0.01 - round(out.time / 0.01)) < 1e-9
 
@@ -366,7 +369,7 @@ def test_lidar_source_survives_corruption(protocol):
                 source, "lidar_scan", pty, dev, lambda k: dev.scan_bytes(scan), 60, 0.02
             )
             st = source.status(ctx)
-            out = source.get_output_port().Eval(ctx)
+            out = source.GetOutputPort("lidar_scan").Eval(ctx)
         finally:
             source.close()
     assert faults.bytes_corrupted > 0
@@ -441,10 +444,12 @@ def test_velodyne_source_decodes_sweeps():
         assert "\n" not in str(e.value)
         ctx = _run_udp(source, clouds, port)
         st = source.status(ctx)
-        out = source.get_output_port().Eval(ctx)
+        out = source.GetOutputPort("lidar_points").Eval(ctx)
+        diagnostics = source.GetOutputPort("diagnostics").Eval(ctx)
     finally:
         source.close()
     assert st.datagrams == 5 * 75 and st.bad_packets == 0
+    assert diagnostics == dataclasses.asdict(st)
     assert st.partial_sweeps == 1 and st.sweeps == 3  # the first is dropped, the last pending
     ref = clouds[st.sweeps].range_image  # sweep k completes when sweep k + 1 starts
     expected = np.where(np.isfinite(ref), np.rint(ref / 0.002) * 0.002, np.inf)
@@ -464,6 +469,6 @@ def test_velodyne_source_survives_corruption():
         source = VelodyneUdpSource(period=0.01, transport=transport)
         ctx = _run_udp(source, clouds, transport.port, faults)
         st = source.status(ctx)
-        out = source.get_output_port().Eval(ctx)
+        out = source.GetOutputPort("lidar_points").Eval(ctx)
     assert st.datagrams == 6 * 75 and st.bad_packets > 0 and st.sweeps >= 1
     assert out.range_image.shape == (16, 1800) and np.all(np.isfinite(out.points))

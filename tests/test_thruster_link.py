@@ -237,7 +237,7 @@ def test_round_trip_through_pty(thrusters, command):
     try:
         sink = rig.sink
         assert not sink.sender_running  # nothing started by construction / Initialize
-        assert not sink.HasDirectFeedthrough(0, 0) and not sink.HasDirectFeedthrough(0, 1)
+        assert not any(sink.HasDirectFeedthrough(0, k) for k in range(3))
         assert sink.get_input_port().size() == command_size(thrusters) == len(command)
         assert sink.GetOutputPort("thrust_measured").size() == len(command)
         assert sink.GetOutputPort("thruster_link").size() == 5
@@ -265,6 +265,16 @@ def test_round_trip_through_pty(thrusters, command):
         n_tlm, n_sent, age, status, errors = rig.link()
         assert n_tlm >= 2 and n_sent >= 2 and 0.0 <= age < 0.5
         assert status == 0 and errors == 0
+        diagnostics = sink.GetOutputPort("diagnostics").Eval(rig.sink_ctx)
+        assert list(diagnostics) == [
+            "telemetry_frames", "crc_errors", "frame_errors",
+            "frames_sent", "neutral_frames", "stale_events",
+        ]  # fmt: skip
+        assert diagnostics["telemetry_frames"] >= 2 and diagnostics["crc_errors"] == 0
+        assert diagnostics["neutral_frames"] == diagnostics["stale_events"] == 0
+        time.sleep(0.1)  # the sender keeps writing; the port reads its live counter (no cache)
+        sent = sink.GetOutputPort("diagnostics").Eval(rig.sink_ctx)["frames_sent"]
+        assert diagnostics["frames_sent"] < sent <= sink.frames_sent
 
         # thrust_measured follows the telemetry when the command changes
         new = command.copy()
@@ -326,6 +336,8 @@ def test_stale_controller_gets_neutral_frames():
             assert fw.frames_ok >= ok0 + 3 and not fw.watchdog_tripped
             assert fw.pwm_us == (1500,) * 4
         assert rig.sink.stale_events == 1 and rig.sink.neutral_frames >= 3
+        diagnostics = rig.sink.GetOutputPort("diagnostics").Eval(rig.sink_ctx)
+        assert diagnostics["stale_events"] == 1 and diagnostics["neutral_frames"] >= 3
         rig.advance_until(lambda: fw.pwm_us == target)  # the controller is back
         assert rig.sink.stale_events == 1 and fw.watchdog_trips == 0
     finally:

@@ -1,7 +1,12 @@
 """Mission metrics from logged signals (flat keys with units in the name)."""
 
 import numpy as np
+import shapely
+from scipy import ndimage
 
+from usvdrake.analysis.trajectory_metrics import rpe, trajectory_from_planar
+from usvdrake.systems.guidance.map_processing import EIGHT, coarsen
+from usvdrake.systems.slam.slam_summary import Slam2DSummary, Slam3DSummary
 from usvdrake.vessel import VesselParams
 from usvdrake.worlds.world import World, hull_clearance
 
@@ -127,20 +132,18 @@ def estimation_metrics(
 
 
 def slam_metrics(
-    times: np.ndarray, states: np.ndarray, slam_poses: np.ndarray, slam, mount=None
+    times: np.ndarray, states: np.ndarray, slam_poses: np.ndarray, summary: Slam2DSummary
 ) -> dict:
     """SLAM pose against ground truth at the logged times (the SLAM starts at the true initial
     pose, so no alignment): ATE RMSE [m] (Sturm et al. 2012, translational), heading RMSE, the
-    final error, node and constraint counts (002 reports 638 and 1952) and per-scan times.
+    final error, node and constraint counts (Dang 2023 reports 638 and 1952) and per-scan times.
 
-    ``slam_poses`` are the vessel's (body) poses; the backend's ``final_trajectory`` gives the
-    lidar's, so ``mount`` = [x y ψ] of the lidar in the body frame takes them back to the body
-    before they are scored (None: the lidar at the body origin)."""
+    ``slam_poses`` are the vessel's (body) online poses; ``summary`` (the SLAM's
+    ``slam_summary`` port, :func:`~usvdrake.systems.slam.slam_summary.summarise_2d`) carries the
+    final estimate, already in the body frame, and the backend's counts and timings."""
     keep = times >= 1.0
     e = np.hypot(slam_poses[keep, 0] - states[keep, 0], slam_poses[keep, 1] - states[keep, 1])
     h = np.angle(np.exp(1j * (slam_poses[keep, 2] - states[keep, 2])))
-    from usvdrake.analysis.trajectory_metrics import rpe, trajectory_from_planar
-
     est = trajectory_from_planar(times[keep], slam_poses[keep])
     ref = trajectory_from_planar(times[keep], states[keep, :3])
 
@@ -151,23 +154,17 @@ def slam_metrics(
         except ValueError:
             return None
 
-    stats = getattr(slam, "stats", {})
-    track = np.asarray(stats.get("tracking_ms") or [0.0])
-    opt = np.asarray(stats.get("optimisation_ms") or [0.0])
+    track = summary.tracking_ms if len(summary.tracking_ms) else np.zeros(1)
+    opt = summary.optimisation_ms if len(summary.optimisation_ms) else np.zeros(1)
     out = {}
-    if hasattr(slam, "final_trajectory"):
+    t_fin, p_fin = summary.final_times, summary.final_poses
+    if len(t_fin):
         # the final estimate (poses re-expressed from their optimised nodes), at the logged times
-        t_fin, p_fin = slam.final_trajectory()
-        if len(t_fin) and mount is not None:
-            from usvdrake.systems.slam.graph_slam import body_pose
-
-            p_fin = np.array([body_pose(p, mount) for p in p_fin])
-        if len(t_fin):
-            idx = np.clip(np.searchsorted(t_fin, times[keep], side="right") - 1, 0, len(t_fin) - 1)
-            near = np.abs(t_fin[idx] - times[keep]) < 0.1
-            ef = np.hypot(p_fin[idx, 0] - states[keep, 0], p_fin[idx, 1] - states[keep, 1])[near]
-            if len(ef):
-                out["ate_final_m"] = float(np.sqrt(np.mean(ef**2)))
+        idx = np.clip(np.searchsorted(t_fin, times[keep], side="right") - 1, 0, len(t_fin) - 1)
+        near = np.abs(t_fin[idx] - times[keep]) < 0.1
+        ef = np.hypot(p_fin[idx, 0] - states[keep, 0], p_fin[idx, 1] - states[keep, 1])[near]
+        if len(ef):
+            out["ate_final_m"] = float(np.sqrt(np.mean(ef**2)))
     return out | {
         # the poses as estimated online, before later loop closures corrected them
         "ate_m": float(np.sqrt(np.mean(e**2))) if len(e) else 0.0,
@@ -176,13 +173,13 @@ def slam_metrics(
         # RPE (Sturm et al. 2012) over 1 m and 10 m of travel, translational RMSE [m]
         "rpe_m": rpe_or_none(1.0),
         "rpe_10m_m": rpe_or_none(10.0),
-        "slam_nodes": len(getattr(slam, "nodes", [])),
-        "slam_constraints": len(getattr(slam, "constraints", [])),
-        "slam_loops": int(stats.get("loops", 0)),
+        "slam_nodes": summary.nodes,
+        "slam_constraints": summary.constraints,
+        "slam_loops": summary.loops,
         "tracking_ms_median": float(np.median(track)),
         "optimisation_ms_median": float(np.median(opt)),
         "optimisation_ms_max": float(np.max(opt)),
-        "full_optimisation_ms_max": float(max(stats.get("full_optimisation_ms", []), default=0.0)),
+        "full_optimisation_ms_max": float(max(summary.full_optimisation_ms, default=0.0)),
     }
 
 
@@ -202,10 +199,6 @@ def explored_fraction(world: World, start_xy, final_map, resolution: float) -> d
     explored when the map (an :class:`OccupancyGrid` in the world frame, coarsened to the same
     resolution) marks it free or occupied at that position.
     """
-    from scipy import ndimage
-
-    from usvdrake.systems.guidance.map_processing import EIGHT, coarsen
-
     truth = world.occupancy(resolution, bounds=world.water.bounds)
     free = truth.data == truth.FREE
     r0, c0 = truth.to_cell(*np.asarray(start_xy, float)[:2])
@@ -261,8 +254,6 @@ def exploration_metrics(
     )
     region = world.regions.get("narrow_passage")
     if region is not None:
-        import shapely
-
         inside = shapely.contains_xy(region, states[:, 0], states[:, 1])
         out.update(
             speed_narrow_mps=float(np.median(speed[inside])) if inside.any() else None,
@@ -290,48 +281,47 @@ def truth_at(times: np.ndarray, states: np.ndarray, t: np.ndarray) -> np.ndarray
     )
 
 
-def slam3d_counts(slam) -> dict:
+def slam3d_counts(summary: Slam3DSummary) -> dict:
     """Counts and per-keyframe costs of a 3D SLAM run (no ground truth needed): keyframes,
     sweeps, keyframe and feature times [ms] (None before the first keyframe), GPS factors and
     rejections by reason, loop candidates and closures, degenerate keyframes.
 
-    ``keyframe_ms_*`` is the issue's (and 000 §VI-A's) per-keyframe cost: feature extraction +
+    ``keyframe_ms_*`` is the per-keyframe cost of Roboat II §VI-A: feature extraction +
     registration + iSAM2 update (with the GPS factor); the loop search (match against an old
     submap and extra updates, LIO-SAM's separate 1 Hz thread) is ``loop_ms_*`` and the sum of
     both ``keyframe_with_loop_ms_*``."""
-    recs = slam.keyframes
-    ms = np.array([r.total_ms for r in recs])
-    loop = np.array([r.loop_ms for r in recs])
-    c = slam.graph.counts
+    ms, loop = summary.total_ms, summary.loop_ms
 
     def stat(f, values):
         return float(f(values)) if len(values) else None
 
     return {
-        "slam_keyframes": len(recs),
-        "slam_sweeps": int(slam.sweeps),
+        "slam_keyframes": len(summary.times),
+        "slam_sweeps": summary.sweeps,
         "keyframe_ms_median": stat(np.median, ms),
         "keyframe_ms_p95": stat(lambda v: np.percentile(v, 95), ms),
         "keyframe_ms_max": stat(np.max, ms),
-        "features_ms_median": stat(np.median, [r.features_ms for r in recs]),
+        "features_ms_median": stat(np.median, summary.features_ms),
         "loop_ms_median": stat(np.median, loop),
         "loop_ms_p95": stat(lambda v: np.percentile(v, 95), loop),
         "loop_ms_max": stat(np.max, loop),
         "keyframe_with_loop_ms_median": stat(np.median, ms + loop),
         "keyframe_with_loop_ms_p95": stat(lambda v: np.percentile(v, 95), ms + loop),
-        "gps_factors": int(c.gps_accepted),
-        "gps_rejected": dict(c.gps_rejected),
-        "loop_candidates": int(c.loop_candidates),
-        "loop_closures": int(c.loop_closures),
-        "degenerate_keyframes": int(sum(r.degenerate for r in recs)),
+        "gps_factors": summary.gps_accepted,
+        "gps_rejected": dict(summary.gps_rejected),
+        "loop_candidates": summary.loop_candidates,
+        "loop_closures": summary.loop_closures,
+        "degenerate_keyframes": int(summary.degenerate.sum()),
     }
 
 
-def slam3d_metrics(times: np.ndarray, states: np.ndarray, slam_poses: np.ndarray, slam) -> dict:
+def slam3d_metrics(
+    times: np.ndarray, states: np.ndarray, slam_poses: np.ndarray, summary: Slam3DSummary
+) -> dict:
     """The 3D factor-graph SLAM (000 §V) against ground truth.
 
     times, states: ground truth (n × 6); slam_poses: the online [x y ψ] output at ``times``;
-    slam: the :class:`~usvdrake.systems.slam.lidar_inertial.LidarInertialSlam` after the run.
+    summary: the SLAM's :class:`~usvdrake.systems.slam.slam_summary.Slam3DSummary` after the run.
     The vessel moves in the plane at height 0 (the body origin on the water), so a keyframe's
     estimated z is its vertical error.
 
@@ -351,18 +341,17 @@ def slam3d_metrics(times: np.ndarray, states: np.ndarray, slam_poses: np.ndarray
       keyframes without a valid fix (bridges)."""
     keep = times >= 1.0
     e = np.hypot(slam_poses[keep, 0] - states[keep, 0], slam_poses[keep, 1] - states[keep, 1])
-    recs = slam.keyframes
     out = {
         "ate_m": float(np.sqrt(np.mean(e**2))) if len(e) else 0.0,
         "slam_final_error_m": float(e[-1]) if len(e) else 0.0,
-    } | slam3d_counts(slam)
-    if not recs:
+    } | slam3d_counts(summary)
+    if not len(summary.times):
         return out
-    kt = np.array([r.time for r in recs])
+    kt = summary.times
     truth = truth_at(times, states, kt)
-    online = np.array([r.online for r in recs])
+    online = summary.online
     err_online = np.hypot(online[:, 0] - truth[:, 0], online[:, 1] - truth[:, 1])
-    _, final = slam.trajectory()
+    final = summary.final
     err_final = np.hypot(final[:, 0, 3] - truth[:, 0], final[:, 1, 3] - truth[:, 1])
     p_true = np.column_stack([truth[:, :2], np.zeros(len(kt))])
     ret = (online[-1, :3] - online[0, :3]) - (p_true[-1] - p_true[0])
@@ -372,8 +361,8 @@ def slam3d_metrics(times: np.ndarray, states: np.ndarray, slam_poses: np.ndarray
         worst = max((float(err_online[a:b].max()) for a, b in runs), default=0.0)
         return len(runs), worst
 
-    n_deg, deg_err = segments(np.array([r.degenerate for r in recs]))
-    n_out, out_err = segments(~np.array([r.gps_valid for r in recs]))
+    n_deg, deg_err = segments(summary.degenerate)
+    n_out, out_err = segments(~summary.gps_valid)
     return out | {
         "ate_final_m": float(np.sqrt(np.mean(err_final**2))),
         "ate_keyframes_online_m": float(np.sqrt(np.mean(err_online**2))),
@@ -388,3 +377,37 @@ def slam3d_metrics(times: np.ndarray, states: np.ndarray, slam_poses: np.ndarray
         "gps_outage_segments": n_out,
         "gps_outage_max_error_m": out_err,
     }
+
+
+def control_estimation_metrics(
+    times, states, estimates, finals: dict, pose=None, nmhe_solve_ms=None, estimate_times=None
+) -> dict:
+    """NMPC tracking RMSE and solve statistics, NMHE estimation errors and solve times (empty
+    if the vessel has neither). ``times``/``states``: ground truth samples; ``estimates``: the
+    logged ``state_estimate`` at those times; ``finals``: the diagnostics ports' values at the
+    end of the run (``nmpc_diagnostics`` = [solves, failures, median ms, p95 ms],
+    ``reference_track``, ``nmhe_diagnostics`` = [failures, solves, last, max, total ms, events]);
+    ``pose``: the logged pose measurements; ``nmhe_solve_ms``: the logged ``nmhe_solve_ms``;
+    ``estimate_times``: the logged ``estimate_time`` (the instant each estimate refers to)."""
+    out = {}
+    if "nmpc_diagnostics" in finals:
+        solves, failures, median, p95 = finals["nmpc_diagnostics"]
+        if finals.get("reference_track") is not None:
+            out.update(tracking_metrics(times, states, finals["reference_track"]))
+        out.update(
+            nmpc_failures=int(failures),
+            nmpc_solves=int(solves),
+            nmpc_solve_ms_median=float(median),
+            nmpc_solve_ms_p95=float(p95),
+        )
+    if "nmhe_diagnostics" in finals:
+        out.update(estimation_metrics(times, states, estimates, pose, estimate_times))
+        diag = finals["nmhe_diagnostics"]
+        ms = np.zeros(0) if nmhe_solve_ms is None else np.asarray(nmhe_solve_ms)
+        ms = ms[ms > 0]
+        out.update(
+            nmhe_failures=int(diag[0]),
+            nmhe_solve_ms_median=float(np.median(ms)) if len(ms) else 0.0,
+            nmhe_solve_ms_max=float(diag[3]),
+        )
+    return out

@@ -1,20 +1,23 @@
 """The hardware station: the boat's real devices behind the station's ports (DESIGN.md).
 
 Same port names as :func:`usvdrake.diagrams.station.make_sim_station` minus
-``ground_truth_state`` (there is none on the water), plus ``watchdog_status`` and
-``thruster_link``::
+``ground_truth_state`` (there is none on the water), plus ``watchdog_status``,
+``thruster_link`` and the devices' counters (``<device>_diagnostics``)::
 
     thruster_command ─► Watchdog ─► ThrusterSerialSink ─► thrust_measured, thruster_link
                            ▲ gps, imu, lidar (required ones)
-    GpsSerialSource ─► gps ─┐
-    ImuSerialSource ─► imu ─┴► GnssImuPose ─► pose_measurement
-    LidarSerialSource ─► lidar_scan        VelodyneUdpSource ─► lidar_points
+    gps (GpsSerialSource) ─► gps ─┐
+    imu (ImuSerialSource) ─► imu ─┴► GnssImuPose ─► pose_measurement
+    lidar2d (LidarSerialSource) ─► lidar_scan     lidar3d (VelodyneUdpSource) ─► lidar_points
 
-Devices come from the scenario's ``hardware`` section (:class:`~usvdrake.scenario.HardwareConfig`);
-a device with no port is not fitted. The ``Watchdog`` zeroes the thrust while a sensor the
-autonomy needs is silent for ``hardware.sensor_timeout``; the sink's keep-alive thread sends
-neutral when the diagram itself stops handing it commands; the microcontroller's own watchdog
-covers a cut wire (``hardware_io/PROTOCOL.md``).
+The sensor devices come from the device table :data:`~usvdrake.diagrams.devices.DEVICES`: every
+row that the scenario's ``hardware`` section (:class:`~usvdrake.scenario.HardwareConfig`) fits
+is built and named by its row's name, the sensor's one name (``gps``, ``imu``, ``lidar2d``,
+``lidar3d``, as the simulated station names its sensors). The thruster MCU and the watchdog are
+fixed parts. The ``Watchdog`` zeroes the thrust while a sensor the autonomy needs is silent for
+``hardware.sensor_timeout``; the sink's keep-alive thread sends neutral when the diagram itself
+stops handing it commands; the microcontroller's own watchdog covers a cut wire
+(``hardware_io/PROTOCOL.md``).
 """
 
 from __future__ import annotations
@@ -22,31 +25,48 @@ from __future__ import annotations
 import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder
 
+from hardware_io.systems.gnss_imu_pose import GnssImuPose
+from hardware_io.systems.thruster_serial_sink import ThrusterSerialSink
+from hardware_io.systems.watchdog import Watchdog
+from usvdrake.diagrams.devices import DEVICES
 from usvdrake.scenario import HardwareConfig, Scenario
 from usvdrake.systems.vessel.thrusters import command_size
 from usvdrake.vessel import VesselParams
 from usvdrake.worlds.world import World
 
-__all__ = ["close_hardware", "make_hardware_station", "station_ports_for"]
+__all__ = [
+    "close_hardware",
+    "hardware_metrics",
+    "make_hardware_station",
+    "port_devices",
+    "station_ports_for",
+]
 
-#: Station output port → the hardware devices that make it.
-PORT_DEVICES = {
-    "gps": ("gps",),
-    "imu": ("imu",),
-    "pose_measurement": ("gps", "imu"),
-    "lidar_scan": ("lidar2d",),
-    "lidar_points": ("lidar3d",),
-}
+#: Station output ports fused from several devices → those devices.
+FUSED_PORTS = {"pose_measurement": ("gps", "imu")}
+
+#: :func:`hardware_metrics`' key prefix per device (the 2D lidar's metrics have always been
+#: ``lidar_*``).
+METRIC_PREFIXES = {"gps": "gps", "imu": "imu", "lidar2d": "lidar"}
+
+
+def port_devices() -> dict[str, tuple[str, ...]]:
+    """Station output port → the hardware devices that make it (from :data:`DEVICES`, plus
+    the fused :data:`FUSED_PORTS`)."""
+    out: dict[str, tuple[str, ...]] = {}
+    for name in DEVICES:
+        out.setdefault(DEVICES.get(name).port, (name,))
+    out.update(FUSED_PORTS)
+    return out
 
 
 def _fitted(hw: HardwareConfig, device: str) -> bool:
-    cfg = getattr(hw, device)
-    return bool(cfg.address if device == "lidar3d" else cfg.port)
+    return device in DEVICES and DEVICES.get(device).fitted(hw)
 
 
 def station_ports_for(hw: HardwareConfig) -> list[str]:
     """The sensor ports a hardware station with these devices exports."""
-    return [p for p, devs in PORT_DEVICES.items() if all(_fitted(hw, d) for d in devs)]
+    return [p for p, devs in port_devices().items() if all(_fitted(hw, d) for d in devs)]
 
 
 def _force_mask(thrusters) -> np.ndarray:
@@ -63,42 +83,46 @@ def make_hardware_station(
     hardware: HardwareConfig,
     needs: list[str],
 ) -> Diagram:
-    """The named Diagram ``station`` of the devices in ``hardware``; ``needs`` are the station
-    outputs the autonomy reads (each must be made by fitted devices; those sensors are also the
-    watchdog's required ones). A port that does not exist raises
-    :class:`~hardware_io.transport.PortNotFoundError` with one line naming it."""
-    from hardware_io.systems.gnss_imu_pose import GnssImuPose
-    from hardware_io.systems.gps_serial_source import GpsSerialSource
-    from hardware_io.systems.thruster_serial_sink import ThrusterSerialSink
-    from hardware_io.systems.watchdog import Watchdog
-
+    """The named Diagram ``station`` of the thruster MCU, the watchdog and every device of
+    :data:`~usvdrake.diagrams.devices.DEVICES` that ``hardware`` fits (each system named by its
+    device's name); ``needs`` are the station outputs the autonomy reads (each must be made by
+    fitted devices; those sensors are also the watchdog's required ones). A port that does not
+    exist raises :class:`~hardware_io.transport.PortNotFoundError` with one line naming it; the
+    ports opened before it are closed again."""
     hw = hardware
     if not hw.thrusters.port:
         raise ValueError("hardware.thrusters.port: the hardware station needs the thruster MCU")
+    makers = port_devices()
     missing = [
-        f"{port} (fit hardware.{' and hardware.'.join(PORT_DEVICES[port])})"
+        f"{port} (fit hardware.{' and hardware.'.join(makers[port])})"
         for port in needs
-        if port in PORT_DEVICES and port not in station_ports_for(hw)
+        if port in makers and port not in station_ports_for(hw)
     ]
     if missing:
         raise ValueError("the autonomy needs station output " + ", ".join(missing))
 
-    builder = DiagramBuilder()
-    opened = []  # systems holding ports, closed again if a later one fails
+    opened = []  # systems holding ports or sockets, closed again if the build fails
+    try:
+        station = _build(scenario, vessel, world, hw, needs, makers, opened)
+    except BaseException:
+        for system in opened:
+            if callable(getattr(system, "close", None)):
+                system.close()
+        raise
+    station.set_name("station")
+    return station
 
-    def add(name, factory):
-        try:
-            system = factory()
-        except Exception:
-            for s in opened:
-                s.close()
-            raise
+
+def _build(scenario, vessel, world, hw, needs, makers, opened) -> Diagram:
+    builder = DiagramBuilder()
+
+    def add(name, system):
         opened.append(system)
         return builder.AddNamedSystem(name, system)
 
     sink = add(
         "thruster_serial_sink",
-        lambda: ThrusterSerialSink(
+        ThrusterSerialSink(
             vessel.thrusters,
             hw.thrusters.port,
             hw.thrusters.baudrate,
@@ -106,52 +130,25 @@ def make_hardware_station(
             stale_timeout=hw.stale_timeout,
         ),
     )
-    sources = {}
-    if _fitted(hw, "gps"):
-        sources["gps"] = add(
-            "gps_serial_source",
-            lambda: GpsSerialSource(
-                hw.gps.port, hw.gps.baudrate, world.datum, period=hw.poll_period
-            ),
-        )
-    if _fitted(hw, "imu"):
-        from hardware_io.systems.imu_serial_source import ImuSerialSource
-
-        sources["imu"] = add(
-            "imu_serial_source",
-            lambda: ImuSerialSource(hw.imu.port, hw.imu.baudrate, period=hw.poll_period),
-        )
-    if _fitted(hw, "lidar2d"):
-        from hardware_io.systems.lidar_serial_source import LidarSerialSource
-
-        sources["lidar_scan"] = add(
-            "lidar_serial_source",
-            lambda: LidarSerialSource(
-                hw.lidar2d.port, hw.lidar2d.baudrate, hw.lidar2d.protocol, period=hw.poll_period
-            ),
-        )
-    if _fitted(hw, "lidar3d"):
-        from hardware_io.systems.velodyne_udp_source import VelodyneUdpSource
-
-        sources["lidar_points"] = add(
-            "velodyne_udp_source",
-            lambda: VelodyneUdpSource(hw.lidar3d.address, hw.lidar3d.port, period=hw.poll_period),
-        )
-    for port, system in sources.items():
+    sources = {}  # device name → its system, named after it
+    for name in DEVICES:
+        device = DEVICES.get(name)
+        if device.fitted(hw):
+            sources[name] = add(name, device.make(hw, scenario, world))
+    for name, system in sources.items():
+        port = DEVICES.get(name).port
         builder.ExportOutput(system.GetOutputPort(port), port)
     if "gps" in sources and "imu" in sources:
         pose = builder.AddNamedSystem(
             "gnss_imu_pose", GnssImuPose(world.datum, scenario.initial_state[:3])
         )
-        builder.Connect(sources["gps"].GetOutputPort("gps"), pose.GetInputPort("gps"))
-        builder.Connect(sources["imu"].GetOutputPort("imu"), pose.GetInputPort("imu"))
+        for name in ("gps", "imu"):  # GnssImuPose's inputs are named after the ports
+            port = DEVICES.get(name).port
+            builder.Connect(sources[name].GetOutputPort(port), pose.GetInputPort(port))
         builder.ExportOutput(pose.GetOutputPort("pose_measurement"), "pose_measurement")
 
-    required = sorted({d for p in needs if p in PORT_DEVICES for d in PORT_DEVICES[p]})
-    required_ports = {
-        {"lidar2d": "lidar_scan", "lidar3d": "lidar_points"}.get(d, d): hw.sensor_timeout
-        for d in required
-    }
+    required = sorted({d for p in needs if p in makers for d in makers[p]})
+    required_ports = {DEVICES.get(d).port: hw.sensor_timeout for d in required}
     watchdog = builder.AddNamedSystem(
         "watchdog",
         Watchdog(
@@ -160,8 +157,9 @@ def make_hardware_station(
             force_mask=_force_mask(vessel.thrusters),
         ),
     )
-    for port in required_ports:
-        builder.Connect(sources[port].GetOutputPort(port), watchdog.GetInputPort(port))
+    for d in required:
+        port = DEVICES.get(d).port
+        builder.Connect(sources[d].GetOutputPort(port), watchdog.GetInputPort(port))
     builder.Connect(
         watchdog.GetOutputPort("thruster_command"), sink.GetInputPort("thruster_command")
     )
@@ -169,9 +167,11 @@ def make_hardware_station(
     builder.ExportOutput(watchdog.GetOutputPort("watchdog_status"), "watchdog_status")
     builder.ExportOutput(sink.GetOutputPort("thrust_measured"), "thrust_measured")
     builder.ExportOutput(sink.GetOutputPort("thruster_link"), "thruster_link")
-    station = builder.Build()
-    station.set_name("station")
-    return station
+    for name, system in sources.items():
+        if system.HasOutputPort("diagnostics"):
+            builder.ExportOutput(system.GetOutputPort("diagnostics"), f"{name}_diagnostics")
+    builder.ExportOutput(sink.GetOutputPort("diagnostics"), "thruster_diagnostics")
+    return builder.Build()
 
 
 def close_hardware(diagram: Diagram) -> None:
@@ -181,3 +181,21 @@ def close_hardware(diagram: Diagram) -> None:
             close_hardware(system)
         elif callable(getattr(system, "close", None)):
             system.close()
+
+
+def hardware_metrics(vessel_diagram: Diagram, context) -> dict:
+    """The hardware devices' counters, read off the ``<device>_diagnostics`` output ports of
+    ``vessel_diagram`` (a vessel diagram with a hardware station, or the station itself) in
+    ``context`` (the root context of the diagram it is part of): ``gps_<counter>``,
+    ``imu_<counter>``, ``lidar_<counter>`` (the 2D lidar) for each fitted device, then
+    ``thruster_telemetry_frames``, ``thruster_crc_errors``, ``thruster_frame_errors``,
+    ``thruster_frames_sent``, ``thruster_neutral_frames``, ``thruster_stale_events``. Empty
+    for a diagram without them (a simulated station)."""
+    ctx = vessel_diagram.GetMyContextFromRoot(context)
+    out = {}
+    for device, prefix in (*METRIC_PREFIXES.items(), ("thruster", "thruster")):
+        port = f"{device}_diagnostics"
+        if vessel_diagram.HasOutputPort(port):
+            counters = vessel_diagram.GetOutputPort(port).Eval(ctx)
+            out.update({f"{prefix}_{key}": value for key, value in counters.items()})
+    return out

@@ -2,8 +2,9 @@
 
 The row's name is the scenario's name for the sensor; it says which station output port the
 sensor feeds (the signal the autonomy reads, the same in simulation and on the water), the name
-of the simulated system in the station, and how to build that system. The hardware station's
-devices are named by the same names (:mod:`usvdrake.diagrams.hardware_station`). A new sensor
+of the simulated system in the station (the row's name), and how to build that system. The
+hardware devices (:data:`usvdrake.diagrams.devices.DEVICES`) are keyed, and their systems in the
+hardware station named, by the same names, and take their ports from these rows. A new sensor
 is a LeafSystem with a ``state`` input plus one ``SENSORS.register`` call
 (``docs/extending.md``).
 """
@@ -57,7 +58,7 @@ SENSORS.register(
     "lidar2d",
     Sensor(
         "lidar_scan",
-        "lidar_2d",
+        "lidar2d",
         lambda s, w, o: Lidar2D(s.sensors.lidar2d, w.scene, s.seed, others=o),
         "2D scanning lidar (RPLIDAR A1, Hokuyo UTM-30LX presets): LaserScan",
     ),
@@ -66,7 +67,7 @@ SENSORS.register(
     "lidar3d",
     Sensor(
         "lidar_points",
-        "lidar_3d",
+        "lidar3d",
         lambda s, w, o: Lidar3D(s.sensors.lidar3d, w.scene, s.seed, others=o),
         "3D lidar (VLP-16 preset): PointCloud with per-point times",
     ),
@@ -80,7 +81,7 @@ SENSORS.register(
     "pose",
     Sensor(
         "pose_measurement",
-        "pose_sensor",
+        "pose",
         lambda s, w, o: PoseSensor(s.sensors.pose, s.seed),
         "noisy [x y ψ r] standing in for Roboat II's SLAM pose + gyro (for the NMHE)",
     ),

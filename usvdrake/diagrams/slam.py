@@ -28,6 +28,8 @@ def _export_2d(parts: AutonomyParts, slam):
     parts.builder.ExportInput(slam.GetInputPort("lidar_scan"), "lidar_scan")
     for port in SLAM2D_OUTPUTS:
         parts.builder.ExportOutput(slam.GetOutputPort(port), port)
+    if slam.HasOutputPort("slam_summary"):  # the known-pose mapper has nothing to score
+        parts.builder.ExportOutput(slam.GetOutputPort("slam_summary"), "slam_summary")
     return slam
 
 
@@ -107,7 +109,14 @@ def add_factor_graph(parts: AutonomyParts):
     )
     for port in ("lidar_points", "imu", "gps"):
         parts.builder.ExportInput(slam.GetInputPort(port), port)
-    for port in ("slam_pose", "slam_covariance", "slam_state", "slam_pose3d", "slam_map3d"):
+    for port in (
+        "slam_pose",
+        "slam_covariance",
+        "slam_state",
+        "slam_pose3d",
+        "slam_map3d",
+        "slam_summary",
+    ):
         parts.builder.ExportOutput(slam.GetOutputPort(port), port)
     return slam
 

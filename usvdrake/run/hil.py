@@ -29,13 +29,13 @@ import numpy as np
 from pydrake.systems.framework import DiagramBuilder, EventStatus, LeafSystem
 from pydrake.systems.primitives import LogVectorOutput
 
-from usvdrake.analysis.metrics import vessel_clearance
+from usvdrake.analysis.metrics import control_estimation_metrics, vessel_clearance
 from usvdrake.diagrams.hardware_station import close_hardware
 from usvdrake.diagrams.vessel_diagram import build_vessel_diagram
 from usvdrake.jsonable import jsonable
 from usvdrake.logs.mission_log import MissionLogWriter, add_mission_recorder
 from usvdrake.run.campaign import scenario_yaml
-from usvdrake.run.mission import control_estimation_metrics, run_mission
+from usvdrake.run.mission import final_values, run_mission
 from usvdrake.run.simulate import simulate
 from usvdrake.scenario import Scenario
 from usvdrake.vessel import load_vessel
@@ -297,11 +297,10 @@ def _truth_metrics(scenario, vessel, context, logs, keep, times, states, report)
     nmhe_ms = logged("nmhe_solve_ms")
     est_time = logged("estimate_time")
     out = control_estimation_metrics(
-        vessel,
-        context,
         times,
         states,
         logged("state_estimate"),
+        final_values(vessel, context),
         logged("pose_measurement"),
         None if nmhe_ms is None else nmhe_ms.ravel(),
         None if est_time is None else est_time.ravel(),

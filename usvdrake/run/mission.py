@@ -1,6 +1,5 @@
 """``run_mission``: simulate a scenario's vessel diagram, record it, and measure it."""
 
-import copy
 import json
 from pathlib import Path
 
@@ -10,12 +9,11 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput
 
 from usvdrake.analysis.metrics import (
-    estimation_metrics,
+    control_estimation_metrics,
     exploration_metrics,
     mission_metrics,
     slam3d_metrics,
     slam_metrics,
-    tracking_metrics,
     vessel_clearance,
 )
 from usvdrake.diagrams.vessel_diagram import build_vessel_diagram
@@ -23,33 +21,30 @@ from usvdrake.logs.mission_log import MissionLogWriter, add_mission_recorder
 from usvdrake.run.fleet import run_fleet_mission
 from usvdrake.run.simulate import MissionResult, make_meshcat, simulate, write_tum
 from usvdrake.scenario import Scenario
+from usvdrake.systems.slam.slam_summary import Slam2DSummary, Slam3DSummary
 from usvdrake.vessel import load_vessel
 from usvdrake.viz.report import write_report
 from usvdrake.worlds import make_world
 
 
-def _exploration_summary(
-    scenario, vessel, world, autonomy, context, logs, times, states, clearance
-) -> dict:
-    """003's exploration metrics (:func:`exploration_metrics`) on the final SLAM map, with the
+def _exploration_summary(scenario, vessel, world, finals, logs, times, states, clearance) -> dict:
+    """The NTNU explorer's metrics (:func:`exploration_metrics`) on the final SLAM map, with the
     time the explorer declared the exploration finished and which map and pose it used."""
-    final_map = autonomy.GetOutputPort("slam_map").Eval(autonomy.GetMyContextFromRoot(context))
     status_log = logs["explorer_status"]
     status = status_log.data().T
     done = np.flatnonzero(status[:, 2] > 0)
-    explorer = autonomy.GetSubsystemByName("frontier_explorer")
-    final = explorer.GetOutputPort("explorer_status").Eval(explorer.GetMyContextFromRoot(context))
+    final = finals["explorer_status"]
     finished_time = None
     if len(done):
         finished_time = float(status_log.sample_times()[done[0]])
     elif final[2] > 0:  # finished after the last log sample: the run stopped right there
-        finished_time = float(context.get_time())
+        finished_time = float(finals["time"])
     out = exploration_metrics(
         times,
         states,
         vessel,
         world,
-        final_map,
+        finals["slam_map"],
         scenario.exploration.explorer.resolution,
         finished_time,
         clearance,
@@ -64,41 +59,29 @@ def _exploration_summary(
     return out
 
 
-def control_estimation_metrics(
-    vessel, context, times, states, estimates, pose=None, nmhe_solve_ms=None, estimate_times=None
-) -> dict:
-    """NMPC tracking RMSE and solve statistics, NMHE estimation errors and solve times, read off
-    the vessel diagram's exported diagnostics ports (empty if it has neither). ``times``/
-    ``states``: ground truth samples; ``estimates``: the logged ``state_estimate`` at those
-    times; ``pose``: the logged pose measurements; ``nmhe_solve_ms``: the logged
-    ``nmhe_solve_ms`` output; ``estimate_times``: the logged ``estimate_time`` (the instant
-    each estimate refers to)."""
-    out = {}
+# Ports whose values at the end of a run the metrics read (diagnostics, summaries, final maps)
+FINAL_PORTS = (
+    "mission_complete",
+    "nmpc_diagnostics",
+    "reference_track",
+    "nmhe_diagnostics",
+    "slam_summary",
+    "slam_map",
+    "explorer_status",
+)
+
+
+def final_values(vessel, context) -> dict:
+    """The exported :data:`FINAL_PORTS` the vessel diagram has, evaluated at the run's end
+    (plus ``time``): all the metrics read of the systems besides the logged signals."""
     vessel_context = vessel.GetMyContextFromRoot(context)
-    if vessel.HasOutputPort("nmpc_diagnostics"):
-        solves, failures, median, p95 = vessel.GetOutputPort("nmpc_diagnostics").Eval(
-            vessel_context
-        )
-        if vessel.HasOutputPort("reference_track"):
-            reference = vessel.GetOutputPort("reference_track").Eval(vessel_context)
-            out.update(tracking_metrics(times, states, reference))
-        out.update(
-            nmpc_failures=int(failures),
-            nmpc_solves=int(solves),
-            nmpc_solve_ms_median=float(median),
-            nmpc_solve_ms_p95=float(p95),
-        )
-    if vessel.HasOutputPort("nmhe_diagnostics"):
-        out.update(estimation_metrics(times, states, estimates, pose, estimate_times))
-        diag = vessel.GetOutputPort("nmhe_diagnostics").Eval(vessel_context)
-        ms = np.zeros(0) if nmhe_solve_ms is None else np.asarray(nmhe_solve_ms)
-        ms = ms[ms > 0]
-        out.update(
-            nmhe_failures=int(diag[0]),
-            nmhe_solve_ms_median=float(np.median(ms)) if len(ms) else 0.0,
-            nmhe_solve_ms_max=float(diag[3]),
-        )
-    return out
+    finals = {"time": context.get_time()}
+    for name in FINAL_PORTS:
+        if name == "slam_map" and not vessel.HasOutputPort("explorer_status"):
+            continue  # rendering the map costs; only the exploration's coverage reads it
+        if vessel.HasOutputPort(name):
+            finals[name] = vessel.GetOutputPort(name).Eval(vessel_context)
+    return finals
 
 
 def run_mission(
@@ -173,7 +156,6 @@ def run_mission(
         )
         t, complete, wall = outcome.sim_time, outcome.done, outcome.wall_time
         context = outcome.simulator.get_context()
-        vessel_context = vessel_diagram.GetMyContextFromRoot(context)
     finally:  # an interrupted or failed run still leaves a finished, readable log
         if log_writer is not None:
             log_writer.close()
@@ -188,6 +170,7 @@ def run_mission(
     states = logs["ground_truth_state"].data().T
     reference = logs["reference"].data().T
     thrust = logs["thrust_applied"].data().T
+    finals = final_values(vessel_diagram, context)
     metrics = {
         "scenario": scenario.name,
         "vessel": scenario.vessel,
@@ -197,9 +180,7 @@ def run_mission(
         "sim_time_s": float(t),
         "wall_time_s": float(wall),
         "realtime_factor": float(t / wall) if wall > 0 else float("inf"),
-        "mission_complete": bool(
-            complete or vessel_diagram.GetOutputPort("mission_complete").Eval(vessel_context)[0] > 0
-        ),
+        "mission_complete": bool(complete or finals["mission_complete"][0] > 0),
     }
     clearance = vessel_clearance(world, states, vessel)  # once: several metrics read it
     goals = np.asarray(scenario.mission.waypoints)
@@ -209,40 +190,23 @@ def run_mission(
 
     metrics.update(
         control_estimation_metrics(
-            vessel_diagram,
-            context,
             times,
             states,
             logs["state_estimate"].data().T,
+            finals,
             logs["pose_measurement"].data().T if "pose_measurement" in logs else None,
             logs["nmhe_solve_ms"].data().ravel() if "nmhe_solve_ms" in logs else None,
             logs["estimate_time"].data().ravel() if "estimate_time" in logs else None,
         )
     )
-
-    autonomy = vessel_diagram.GetSubsystemByName("autonomy")
-    if autonomy.HasSubsystemNamed("lidar_slam_2d"):
-        slam_sys = autonomy.GetSubsystemByName("lidar_slam_2d")
-        slam = slam_sys.slam(slam_sys.GetMyContextFromRoot(context))
-        if hasattr(slam, "optimise_pending"):
-            # the final estimate: a full optimisation still running (merged at the next 1 Hz
-            # event) or asked for when the mission ended is merged, in a copy of the state
-            slam = copy.deepcopy(slam)
-            slam.optimise_pending()
+    summary = finals.get("slam_summary")
+    if isinstance(summary, Slam2DSummary):
+        metrics.update(slam_metrics(times, states, logs["slam_pose"].data().T, summary))
+    elif isinstance(summary, Slam3DSummary):
+        metrics.update(slam3d_metrics(times, states, logs["slam_pose"].data().T, summary))
+    if "explorer_status" in finals:
         metrics.update(
-            slam_metrics(times, states, logs["slam_pose"].data().T, slam, mount=slam_sys.mount)
-        )
-
-    if autonomy.HasSubsystemNamed("factor_graph_slam"):
-        slam_sys = autonomy.GetSubsystemByName("factor_graph_slam")
-        slam = slam_sys.slam(slam_sys.GetMyContextFromRoot(context))
-        metrics.update(slam3d_metrics(times, states, logs["slam_pose"].data().T, slam))
-
-    if autonomy.HasSubsystemNamed("frontier_explorer"):
-        metrics.update(
-            _exploration_summary(
-                scenario, vessel, world, autonomy, context, logs, times, states, clearance
-            )
+            _exploration_summary(scenario, vessel, world, finals, logs, times, states, clearance)
         )
 
     result = MissionResult(metrics, times, states, reference, thrust)

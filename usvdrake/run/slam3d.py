@@ -37,6 +37,7 @@ from usvdrake.systems.slam.lidar_inertial import (
     planar_pose,
     pose_matrix,
 )
+from usvdrake.systems.slam.slam_summary import summarise_3d
 
 SAME_TIME = 1e-6  # [s] messages closer than this are of one instant (ordered IMU, GPS, lidar)
 KIND_ORDER = {"imu": 0, "gps": 1, "lidar": 2}
@@ -255,9 +256,9 @@ def run_slam3d(
         "realtime_factor": duration / wall if wall > 0 else 0.0,
     }
     if truth is not None and len(gt_t):
-        metrics |= slam3d_metrics(gt_t, truth[1], online, slam)
+        metrics |= slam3d_metrics(gt_t, truth[1], online, summarise_3d(slam))
     else:
-        metrics |= slam3d_counts(slam)
+        metrics |= slam3d_counts(summarise_3d(slam))
     kt, poses = slam.trajectory()
     return Slam3DResult(metrics, kt, poses, slam, source, truth, online)
 

@@ -13,6 +13,7 @@ from usvdrake.systems.slam.lidar_inertial import (
     planar_pose,
     pose_matrix,
 )
+from usvdrake.systems.slam.slam_summary import summarise_3d
 
 # Offset of the SLAM's tick after the sensors' sample instants: the IMU, GPS and lidar update at
 # multiples of their periods, so a tick 1 ms later reads the sample of that same instant.
@@ -94,6 +95,13 @@ class FactorGraphSlam(LeafSystem):
             "slam_map3d",
             lambda: AbstractValue.Make(KeyframeMap()),
             self._calc_map,
+            prerequisites_of_calc=deps,
+        )
+        # the run's keyframes and counts (what metrics read when the run ends)
+        self.DeclareAbstractOutputPort(
+            "slam_summary",
+            lambda: AbstractValue.Make(summarise_3d(slam)),
+            lambda context, value: value.set_value(summarise_3d(self.slam(context))),
             prerequisites_of_calc=deps,
         )
 

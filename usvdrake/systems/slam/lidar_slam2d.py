@@ -8,6 +8,7 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 from usvdrake.sensors.messages import LaserScan
 from usvdrake.systems.slam.graph_slam import GraphSlam, GraphSlamConfig, body_pose, compose
 from usvdrake.systems.slam.hector import HectorConfig, make_hector
+from usvdrake.systems.slam.slam_summary import Slam2DSummary, summarise_2d
 from usvdrake.worlds.world import OccupancyGrid
 
 
@@ -25,10 +26,13 @@ class LidarSlam2D(LeafSystem):
         - slam_pose
         - slam_covariance
         - slam_map
+        - slam_summary
 
     ``slam_pose`` = [x y ψ] of the vessel in the map frame (the initial pose's frame);
     ``slam_covariance`` (9, row-major 3 × 3) the backend's pose covariance; ``slam_map`` an
-    :class:`OccupancyGrid` rendered on demand. The update runs at the lidar's period and skips a
+    :class:`OccupancyGrid` rendered on demand; ``slam_summary`` the run's
+    :class:`~usvdrake.systems.slam.slam_summary.Slam2DSummary` (final estimate, counts,
+    timings: what metrics read when the run ends). The update runs at the lidar's period and skips a
     scan it has already seen (by its time stamp); the backend's deferred heavy work (the graph's
     full optimisation after a loop closure) is started by a separate 1 Hz event in a worker
     process (``GraphSlamConfig.full_in_worker``) and merged by the next one, never in a scan
@@ -71,6 +75,12 @@ class LidarSlam2D(LeafSystem):
             self._calc_map,
             prerequisites_of_calc=deps,
         )
+        self.DeclareAbstractOutputPort(
+            "slam_summary",
+            lambda: AbstractValue.Make(Slam2DSummary()),
+            self._calc_summary,
+            prerequisites_of_calc=deps,
+        )
 
     @property
     def mount(self) -> np.ndarray:
@@ -107,6 +117,9 @@ class LidarSlam2D(LeafSystem):
 
     def _calc_map(self, context, value):
         value.set_value(self.slam(context).occupancy())
+
+    def _calc_summary(self, context, value):
+        value.set_value(summarise_2d(self.slam(context), self._mount))
 
 
 class HectorSlam(LidarSlam2D):
