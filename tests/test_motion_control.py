@@ -13,11 +13,6 @@ from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer, Line
 from pydrake.systems.scalar_conversion import TemplateSystem
 from scipy import signal
 
-from usvdrake.systems.control.passive_observer import (
-    PassiveObserver,
-    fossen_gains,
-    observer_derivatives,
-)
 from usvdrake.systems.control.pd_controller import (
     PdController,
     PdControllerConfig,
@@ -26,6 +21,8 @@ from usvdrake.systems.control.pd_controller import (
     pd_tau,
 )
 from usvdrake.systems.control.reference_model import ReferenceModel, ReferenceModelConfig
+from usvdrake.systems.estimation.observer_dynamics import fossen_gains, observer_derivatives
+from usvdrake.systems.estimation.passive_observer import PassiveObserver
 from usvdrake.systems.vessel.thrust_allocation import ThrustAllocation
 from usvdrake.systems.vessel.thrust_mixer import ThrustMixer
 from usvdrake.systems.vessel.vessel_dynamics import rotation

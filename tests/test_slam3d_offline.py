@@ -8,6 +8,7 @@ import pytest
 
 from usvdrake.cli import main
 from usvdrake.diagrams import load_scenario, with_overrides
+from usvdrake.diagrams.slam import settings_from_scenario
 from usvdrake.logs.mission_log import read_log_vectors
 from usvdrake.logs.sensor_stream import SensorMessage
 from usvdrake.run.mission import run_mission
@@ -19,7 +20,6 @@ from usvdrake.run.slam3d import (
     plot_ablation,
     run_ablation,
     run_slam3d,
-    settings_from_scenario,
 )
 from usvdrake.typed_yaml import ConfigError
 

@@ -16,8 +16,9 @@ from usvdrake.analysis import stability as st
 from usvdrake.analysis.stability.roa import _CHANNEL_STATES
 from usvdrake.scenario import ControlConfig
 from usvdrake.systems.control.nmpc_problem import NmpcConfig, NmpcProblem
-from usvdrake.systems.control.passive_observer import PassiveObserver, fossen_gains
 from usvdrake.systems.control.pd_controller import PdController, PdControllerConfig, pd_gains
+from usvdrake.systems.estimation.observer_dynamics import fossen_gains
+from usvdrake.systems.estimation.passive_observer import PassiveObserver
 from usvdrake.systems.vessel.thrust_allocation_problem import ThrustAllocator
 from usvdrake.systems.vessel.thrusters import configuration_matrix, extended_matrix
 from usvdrake.systems.vessel.vessel_dynamics import straight_run_jacobian

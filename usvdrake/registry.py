@@ -8,7 +8,7 @@ name to what builds it, kept in the layer that builds that kind:
 kind               registry                                    entry
 =================  ==========================================  =================================
 worlds             ``usvdrake.worlds.WORLDS``                  ``(seed) -> World``
-sensors            ``usvdrake.sensors.SENSORS``                :class:`~usvdrake.sensors.SensorSpec`
+sensors            ``usvdrake.diagrams.sensors.SENSORS``       ``Sensor(port, system, make)``
 estimators         ``usvdrake.diagrams.ESTIMATORS``            :class:`~usvdrake.diagrams.Variant`
 controllers        ``usvdrake.diagrams.CONTROLLERS``           :class:`~usvdrake.diagrams.Variant`
 SLAM methods       ``usvdrake.diagrams.SLAM_METHODS``          :class:`~usvdrake.diagrams.Variant`

@@ -103,7 +103,7 @@ class SlamConfig:
 class ObserverSettings:
     """003's nonlinear passive observer (Fossen 2011 §11.4.1) on the SLAM pose in calm water
     (no wave filter); the gains follow from the cut-offs by
-    :func:`usvdrake.systems.control.passive_observer.fossen_gains`."""
+    :func:`usvdrake.systems.estimation.observer_dynamics.fossen_gains`."""
 
     cutoff: list[float] = field(default_factory=lambda: [2.0, 2.0, 3.0])  # [rad/s] ω_c = K2
     bias_time_constant: float = 1000.0  # [s] T: the bias is a slowly varying force

@@ -13,9 +13,10 @@ import numpy as np
 from usvdrake.diagrams.variants import ESTIMATORS, AutonomyParts, Variant
 from usvdrake.errors import ConfigError
 from usvdrake.scenario import Scenario
-from usvdrake.systems.control.passive_observer import PassiveObserver, fossen_gains
 from usvdrake.systems.estimation.imu_interval import ImuIntervalMean
 from usvdrake.systems.estimation.nmhe_system import Nmhe
+from usvdrake.systems.estimation.observer_dynamics import fossen_gains
+from usvdrake.systems.estimation.passive_observer import PassiveObserver
 
 
 def add_oracle(parts: AutonomyParts):

@@ -12,7 +12,9 @@ from usvdrake.scenario import Scenario
 from usvdrake.systems.guidance.coordinator import Coordinator
 from usvdrake.systems.guidance.fleet_assignment import DeliveryRequest, GridGraph
 from usvdrake.systems.guidance.grid_astar import PlanningGrid
+from usvdrake.vessel import VesselParams, load_vessel
 from usvdrake.worlds import make_world
+from usvdrake.worlds.world import World
 
 PICKUP_COLOR = Rgba(0.1, 0.8, 0.2, 0.9)
 DESTINATION_COLOR = Rgba(0.9, 0.15, 0.15, 0.9)
@@ -28,7 +30,12 @@ def fleet_requests(scenario: Scenario) -> list[DeliveryRequest]:
     ]
 
 
-def build_fleet_diagram(scenario: Scenario, meshcat: Meshcat | None = None) -> Diagram:
+def build_fleet_diagram(
+    scenario: Scenario,
+    meshcat: Meshcat | None = None,
+    vessel: VesselParams | None = None,
+    world: World | None = None,
+) -> Diagram:
     """One diagram for a fleet scenario (controller ``taxi``).
 
     Subsystems: one vessel diagram per ``fleet.vessels`` entry (named after it, e.g.
@@ -43,15 +50,17 @@ def build_fleet_diagram(scenario: Scenario, meshcat: Meshcat | None = None) -> D
     fleet = scenario.fleet
     if scenario.controller != "taxi" or not fleet.vessels:
         raise ValueError(f"build_fleet_diagram: scenario {scenario.name!r} has no fleet")
+    vessel = vessel if vessel is not None else load_vessel(scenario.vessel)
+    world = world if world is not None else make_world(scenario.world, scenario.seed)
     builder = DiagramBuilder()
     names = [v.name for v in fleet.vessels]
     vessels = {}
     for v in fleet.vessels:
         own = dataclasses.replace(scenario, initial_state=list(v.initial_state))
         vessels[v.name] = builder.AddNamedSystem(
-            v.name, build_vessel_diagram(own, meshcat=meshcat, member=v.name)
+            v.name,
+            build_vessel_diagram(own, meshcat=meshcat, member=v.name, vessel=vessel, world=world),
         )
-    world = make_world(scenario.world, scenario.seed)
     grid = PlanningGrid.from_world(world, fleet.assignment_resolution, fleet.taxi.inflation)
     requests = fleet_requests(scenario)
     coordinator = builder.AddNamedSystem(

@@ -6,8 +6,9 @@ from pydrake.systems.framework import Diagram, DiagramBuilder
 from usvdrake.diagrams.autonomy import make_autonomy
 from usvdrake.diagrams.station import make_sim_station
 from usvdrake.scenario import Scenario
-from usvdrake.vessel import load_vessel
+from usvdrake.vessel import VesselParams, load_vessel
 from usvdrake.worlds import make_world
+from usvdrake.worlds.world import World
 
 # Inputs a vessel diagram takes from outside the vessel (the fleet): the coordinator's ride
 # (``task``, to the autonomy) and the other boats' states (``other_vessels``, to the lidars).
@@ -22,7 +23,12 @@ FLEET_COLORS = (  # hull colours of a fleet's boats, in order
 
 
 def build_vessel_diagram(
-    scenario: Scenario, meshcat: Meshcat | None = None, hardware=None, member: str = ""
+    scenario: Scenario,
+    meshcat: Meshcat | None = None,
+    hardware=None,
+    member: str = "",
+    vessel: VesselParams | None = None,
+    world: World | None = None,
 ) -> Diagram:
     """The named vessel diagram of ``scenario``.
 
@@ -40,9 +46,13 @@ def build_vessel_diagram(
     ``member``: the fleet boat this is (controller ``taxi``): the diagram is named after it,
     also exports the inputs ``task`` and ``other_vessels`` (wired by ``build_fleet_diagram``),
     and draws under ``/vessels/<member>`` in the boat's colour; the world is drawn by the first.
+
+    ``vessel`` and ``world``: the scenario's nominal vessel and its world when the caller has
+    resolved them already (a runner does so once per run); None loads and builds them here.
     """
-    vessel = load_vessel(scenario.vessel)  # nominal: the station applies scenario.model_error
-    world = make_world(scenario.world, scenario.seed)
+    # nominal: the station applies scenario.model_error
+    vessel = vessel if vessel is not None else load_vessel(scenario.vessel)
+    world = world if world is not None else make_world(scenario.world, scenario.seed)
     builder = DiagramBuilder()
     autonomy_system = make_autonomy(scenario, vessel, world, meshcat=meshcat, member=member)
     needs = [

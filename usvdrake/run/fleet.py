@@ -64,7 +64,7 @@ def run_fleet_mission(
     if meshcat is None and record and out_dir is not None:
         meshcat = make_meshcat()
     builder = DiagramBuilder()
-    fleet = builder.AddNamedSystem("fleet", build_fleet_diagram(scenario, meshcat))
+    fleet = builder.AddNamedSystem("fleet", build_fleet_diagram(scenario, meshcat, vessel, world))
     names = [v.name for v in scenario.fleet.vessels]
     period = 1.0 / scenario.visualization.rate_hz
     loggers = {}

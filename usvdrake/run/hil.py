@@ -181,6 +181,8 @@ def run_hil(
     duration = float(duration if duration is not None else scenario.duration)
     scenario = dataclasses.replace(scenario, duration=duration)
     (out / "scenario.yaml").write_text(scenario_yaml(scenario))
+    # the world and the nominal vessel, resolved once for the diagram and the metrics
+    nominal, world = load_vessel(scenario.vessel), make_world(scenario.world, scenario.seed)
     hw = scenario.hardware
     rig = None
     if emulated:
@@ -202,7 +204,10 @@ def run_hil(
     try:
         builder = DiagramBuilder()
         vessel = builder.AddNamedSystem(
-            "vessel", build_vessel_diagram(scenario, meshcat=meshcat, hardware=hw)
+            "vessel",
+            build_vessel_diagram(
+                scenario, meshcat=meshcat, hardware=hw, vessel=nominal, world=world
+            ),
         )
         log_writer = _add_log(builder, vessel, out / "log.mcap", scenario)
         clock = builder.AddNamedSystem("clock_recorder", ClockRecorder(writer=log_writer))
@@ -269,7 +274,11 @@ def run_hil(
     times, states = times[keep], None
     if report is not None:
         states = truth_on_host_clock(report, np.asarray(clock.rows, float), times)
-        metrics.update(_truth_metrics(scenario, vessel, context, logs, keep, times, states, report))
+        metrics.update(
+            _truth_metrics(
+                scenario, vessel, context, logs, keep, times, states, report, nominal, world
+            )
+        )
         if compare_sim:
             sim = run_mission(dataclasses.replace(scenario, duration=tracked_until), record=False)
             metrics["sim_position_rmse_m"] = sim.metrics.get("position_rmse_m")
@@ -287,7 +296,9 @@ def run_hil(
     return HilResult(metrics, times, states, files)
 
 
-def _truth_metrics(scenario, vessel, context, logs, keep, times, states, report) -> dict:
+def _truth_metrics(
+    scenario, vessel, context, logs, keep, times, states, report, nominal, world
+) -> dict:
     """Tracking and estimation against the rig's truth, clearance to the world, the watchdog
     and the wires."""
 
@@ -305,9 +316,7 @@ def _truth_metrics(scenario, vessel, context, logs, keep, times, states, report)
         None if nmhe_ms is None else nmhe_ms.ravel(),
         None if est_time is None else est_time.ravel(),
     )
-    clearance = vessel_clearance(
-        make_world(scenario.world, scenario.seed), states, load_vessel(scenario.vessel)
-    )
+    clearance = vessel_clearance(world, states, nominal)
     finite = clearance[np.isfinite(clearance)]
     out["min_clearance_m"] = float(finite.min()) if len(finite) else None
     out["collision_samples"] = int(np.sum(clearance < 0.0))

@@ -110,7 +110,7 @@ def run_mission(
         meshcat = make_meshcat()
     builder = DiagramBuilder()
     vessel_diagram = builder.AddNamedSystem(
-        "vessel", build_vessel_diagram(scenario, meshcat=meshcat)
+        "vessel", build_vessel_diagram(scenario, meshcat=meshcat, vessel=vessel, world=world)
     )
     period = 1.0 / scenario.visualization.rate_hz
     logged = ["ground_truth_state", "reference", "thrust_applied", "state_estimate"]

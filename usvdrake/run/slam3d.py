@@ -110,23 +110,6 @@ def _ticks(stream: Iterator[SensorMessage]) -> Iterator[tuple[float, list[Sensor
         yield group[0].time, sorted(group, key=lambda g: KIND_ORDER[g.kind])
 
 
-def settings_from_scenario(
-    scenario, world_datum: str | None = None
-) -> tuple[LidarInertialConfig, list, str]:
-    """(config, mount [x y z yaw], datum) of ``scenario``'s SLAM, live
-    (``autonomy._add_factor_graph_slam``) and offline: ``slam.factor_graph`` with the GPS
-    antenna height, the 3D lidar's mount, ``sensors.gps.datum`` or the world's datum
-    (``world_datum``, or the scenario's world built to read it)."""
-    sensors = scenario.sensors
-    config = replace(scenario.slam.factor_graph, gps_antenna_height=sensors.gps.antenna_height)
-    datum = sensors.gps.datum or world_datum
-    if not datum:
-        from usvdrake.worlds import make_world
-
-        datum = make_world(scenario.world, scenario.seed).datum
-    return config, list(sensors.lidar3d.mount), datum
-
-
 def run_slam3d(
     path: str | Path,
     config: LidarInertialConfig,

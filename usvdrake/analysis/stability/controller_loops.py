@@ -50,16 +50,16 @@ from usvdrake.analysis.stability.loops import LinearLoop
 from usvdrake.scenario import ControlConfig
 from usvdrake.systems.control.heading_speed_law import heading_speed_tau
 from usvdrake.systems.control.nmpc_problem import NmpcConfig
-from usvdrake.systems.control.passive_observer import (
-    PassiveObserverConfig,
-    observer_derivatives,
-    observer_step,
-)
 from usvdrake.systems.control.pd_controller import (
     PdControllerConfig,
     mass_damping,
     pd_gains,
     pd_tau,
+)
+from usvdrake.systems.estimation.observer_dynamics import (
+    PassiveObserverConfig,
+    observer_derivatives,
+    observer_step,
 )
 from usvdrake.systems.guidance.line_of_sight import los_reference
 from usvdrake.systems.vessel.thrusters import configuration_matrix

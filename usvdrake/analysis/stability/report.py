@@ -38,8 +38,8 @@ from usvdrake.analysis.stability.roa import (
 )
 from usvdrake.jsonable import jsonable
 from usvdrake.scenario import Scenario, read_scenario
-from usvdrake.systems.control.passive_observer import fossen_gains
 from usvdrake.systems.control.pd_controller import pd_gains
+from usvdrake.systems.estimation.observer_dynamics import fossen_gains
 from usvdrake.systems.vessel.thrust_allocation_problem import ThrustAllocator
 from usvdrake.systems.vessel.vessel_dynamics import straight_run_jacobian
 from usvdrake.vessel import VesselParams, load_vessel
