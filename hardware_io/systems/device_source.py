@@ -3,6 +3,7 @@ UDP socket) into one output port of a diagram."""
 
 from __future__ import annotations
 
+from dataclasses import asdict
 from typing import Any, Generic, TypeVar
 
 from pydrake.common.value import AbstractValue
@@ -26,6 +27,10 @@ class DeviceSource(LeafSystem, Generic[MessageT, StatusT]):
     :meth:`_declare_polled_state`: ``poll`` then also receives and returns it, after the
     status, in the order of declaration.
 
+    The output port ``diagnostics`` is the status counters as a flat ``dict`` (field name →
+    value: :func:`dataclasses.asdict` of the status), so runners read them off a port, not off
+    the system.
+
     The transport and the protocol parsers' partial buffers are I/O and live on the system
     object, not in the Context. So contexts of a device source are not independent (all share
     the one port or socket), and the system cannot be cloned or pickled across processes. Call
@@ -42,6 +47,12 @@ class DeviceSource(LeafSystem, Generic[MessageT, StatusT]):
         self._polled = [self._message, self._status]
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
         self.DeclareStateOutputPort(port_name, self._message)
+        self.DeclareAbstractOutputPort(
+            "diagnostics",
+            lambda: AbstractValue.Make({}),
+            self._calc_diagnostics,
+            {self.abstract_state_ticket(self._status)},
+        )
 
     def _declare_polled_state(self, value: Any):
         """Declares an abstract state initialised to ``value`` that ``poll`` receives and
@@ -55,6 +66,9 @@ class DeviceSource(LeafSystem, Generic[MessageT, StatusT]):
 
     def close(self) -> None:
         self.transport.close()
+
+    def _calc_diagnostics(self, context, output):
+        output.set_value(asdict(self.status(context)))
 
     def _update(self, context, state):
         values = [context.get_abstract_state(i).get_value() for i in self._polled]

@@ -47,6 +47,7 @@ class GpsSerialSource(DeviceSource[GpsFix, GpsSerialStatus]):
         name: GpsSerialSource
         output_ports:
         - gps
+        - diagnostics
 
     A periodic unrestricted update every ``period`` seconds (first at t = 0) reads the bytes
     available on the serial port, cuts them into sentences and decodes them; sentences that do

@@ -44,6 +44,7 @@ class ImuSerialSource(DeviceSource[ImuSample, ImuSerialStatus]):
         name: ImuSerialSource
         output_ports:
         - imu
+        - diagnostics
 
     On the first update it writes :data:`GOTO_MEASUREMENT`. A periodic unrestricted update every
     ``period`` seconds (first at t = 0; the MTi's default output is 100 Hz, so 0.01 s) reads

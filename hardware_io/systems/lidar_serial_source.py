@@ -172,6 +172,7 @@ class LidarSerialSource(DeviceSource[LaserScan, LidarSerialStatus]):
         name: LidarSerialSource
         output_ports:
         - lidar_scan
+        - diagnostics
 
     A periodic unrestricted update every ``period`` seconds (first at t = 0) first sends the
     next request of the start sequence, one request per update:

@@ -170,6 +170,7 @@ class ThrusterSerialSink(LeafSystem):
         output_ports:
         - thrust_measured
         - thruster_link
+        - diagnostics
 
     Ports (``k = command_size(thrusters)``: [f] per fixed thruster, [f, α] per azimuth, force
     [N], angle [rad], see ``usvdrake.systems.vessel.thrusters``):
@@ -184,8 +185,12 @@ class ThrusterSerialSink(LeafSystem):
       frames sent, telemetry age [s] (simulated time since the update that received the last
       telemetry; :data:`NO_TELEMETRY_AGE` = 1e9 before any), status byte of the last telemetry,
       corrupted frames + telemetry frames with the wrong channel count].
+    * ``diagnostics`` (output, abstract): a dict of the link counters ``telemetry_frames``,
+      ``crc_errors``, ``frame_errors`` (from the link status) and ``frames_sent``,
+      ``neutral_frames``, ``stale_events`` (the sender thread's live counters, read at each
+      evaluation: the port is not cached).
 
-    Both outputs depend on the state (and time) only, never directly on the input, so the
+    The outputs depend on the state (and time) only, never directly on the input, so the
     system can sit in a feedback loop.
 
     Timing (PROTOCOL.md "Sequence numbers and the watchdog"): a periodic unrestricted update
@@ -242,6 +247,13 @@ class ThrusterSerialSink(LeafSystem):
         self.DeclareVectorOutputPort(
             "thruster_link", BasicVector(len(LINK_FIELDS)), self._calc_link, deps
         )
+        diagnostics = self.DeclareAbstractOutputPort(
+            "diagnostics",
+            lambda: AbstractValue.Make({}),
+            self._calc_diagnostics,
+            {self.abstract_state_ticket(self._status)},
+        )
+        diagnostics.disable_caching_by_default()  # the sender thread's counters are live
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
 
     # ------------------------------------------------------------------ public helpers
@@ -335,6 +347,20 @@ class ThrusterSerialSink(LeafSystem):
                 else:
                     k += 1
         output.SetFromVector(out)
+
+    def _calc_diagnostics(self, context, output):
+        st = self.status(context)
+        sent, neutral, stale = self._sender.counters()
+        output.set_value(
+            {
+                "telemetry_frames": st.telemetry_frames,
+                "crc_errors": st.crc_errors,
+                "frame_errors": st.frame_errors,
+                "frames_sent": sent,
+                "neutral_frames": neutral,
+                "stale_events": stale,
+            }
+        )
 
     def _calc_link(self, context, output):
         st = self.status(context)

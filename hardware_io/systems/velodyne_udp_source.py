@@ -33,6 +33,7 @@ class VelodyneUdpSource(DeviceSource[PointCloud, VelodyneUdpStatus]):
         name: VelodyneUdpSource
         output_ports:
         - lidar_points
+        - diagnostics
 
     A periodic unrestricted update every ``period`` seconds (first at t = 0; the VLP-16 sends
     ~754 packets/s, ~7.5 per 10 ms) reads every queued datagram, decodes it with

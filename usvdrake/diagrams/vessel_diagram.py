@@ -144,8 +144,8 @@ def build_vessel_diagram(
                 builder.Connect(autonomy.GetOutputPort(port), ex_viz.GetInputPort(port))
         if viz_cfg.lidar_hits:
             for port, name, cfg, three_d in (
-                ("lidar_scan", "lidar_2d", scenario.sensors.lidar2d, False),
-                ("lidar_points", "lidar_3d", scenario.sensors.lidar3d, True),
+                ("lidar_scan", "lidar2d", scenario.sensors.lidar2d, False),
+                ("lidar_points", "lidar3d", scenario.sensors.lidar3d, True),
             ):
                 if station.HasOutputPort(port):
                     hits = builder.AddNamedSystem(

@@ -30,7 +30,7 @@ from pydrake.systems.framework import DiagramBuilder, EventStatus, LeafSystem
 from pydrake.systems.primitives import LogVectorOutput
 
 from usvdrake.analysis.metrics import control_estimation_metrics, vessel_clearance
-from usvdrake.diagrams.hardware_station import close_hardware
+from usvdrake.diagrams.hardware_station import close_hardware, hardware_metrics
 from usvdrake.diagrams.vessel_diagram import build_vessel_diagram
 from usvdrake.jsonable import jsonable
 from usvdrake.logs.mission_log import MissionLogWriter, add_mission_recorder
@@ -246,7 +246,7 @@ def run_hil(
             simulator.AdvanceTo(t + CUT_OBSERVATION_S)
         wall = outcome.wall_time + (time.perf_counter() - cut0)
         report = rig.stop() if rig is not None else None
-        host_status = _hardware_status(vessel, context)
+        host_status = hardware_metrics(vessel, context)
         close_hardware(diagram)
         log_writer.close()
     except BaseException:
@@ -335,29 +335,6 @@ def _truth_metrics(
         out[f"wire_{name}_bytes_to_host"] = wire["bytes_out"]
     out["mcu_frames_ok"] = report["mcu"]["frames_ok"]
     out["mcu_frames_rejected"] = report["mcu"]["frames_rejected"]
-    return out
-
-
-def _hardware_status(vessel, context) -> dict:
-    """Counters of the host's serial systems at the end of the run."""
-    out = {}
-    station = vessel.GetSubsystemByName("station")
-    for name in ("gps_serial_source", "imu_serial_source", "lidar_serial_source"):
-        if station.HasSubsystemNamed(name):
-            system = station.GetSubsystemByName(name)
-            status = system.status(system.GetMyContextFromRoot(context))
-            for key, value in dataclasses.asdict(status).items():
-                out[f"{name.removesuffix('_serial_source')}_{key}"] = value
-    sink = station.GetSubsystemByName("thruster_serial_sink")
-    link = sink.status(sink.GetMyContextFromRoot(context))
-    out.update(
-        thruster_telemetry_frames=link.telemetry_frames,
-        thruster_crc_errors=link.crc_errors,
-        thruster_frame_errors=link.frame_errors,
-        thruster_frames_sent=sink.frames_sent,
-        thruster_neutral_frames=sink.neutral_frames,
-        thruster_stale_events=sink.stale_events,
-    )
     return out
 
 
