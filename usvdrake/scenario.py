@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from pydrake.common.yaml import yaml_dump_typed
 
 from usvdrake.sensors.geodesy import DATUMS
 from usvdrake.sensors.gps_model import GpsConfig
@@ -474,3 +475,8 @@ def override(s: Scenario, duration: float | None = None, seed: int | None = None
     if seed is not None:
         changes["seed"] = seed
     return validate_scenario(dataclasses.replace(s, **changes), f"{s.name} (command line)")
+
+
+def scenario_yaml(s: Scenario) -> str:
+    """The complete YAML of ``s`` (floats in shortest round-trip form: it reloads exactly)."""
+    return yaml_dump_typed(s)

@@ -136,7 +136,7 @@ def slam_metrics(
 ) -> dict:
     """SLAM pose against ground truth at the logged times (the SLAM starts at the true initial
     pose, so no alignment): ATE RMSE [m] (Sturm et al. 2012, translational), heading RMSE, the
-    final error, node and constraint counts (Dang 2023 reports 638 and 1952) and per-scan times.
+    final error, node and constraint counts (Pham et al. report 638 and 1952) and per-scan times.
 
     ``slam_poses`` are the vessel's (body) online poses; ``summary`` (the SLAM's
     ``slam_summary`` port, :func:`~usvdrake.systems.slam.slam_summary.summarise_2d`) carries the

@@ -33,6 +33,7 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
         "000 §VI-A ablation: lidar / + GPS / + GPS + loop on a recording or a scenario",
     ),
     ("analyze", "analyze", "analyses of a scenario's closed loop"),
+    ("metrics", "metrics", "measure a recorded mission again from its log.mcap"),
 )
 _MODULES = {name: module for name, module, _ in COMMANDS}
 

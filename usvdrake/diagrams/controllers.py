@@ -1,6 +1,6 @@
 """The built-in waypoint and fleet controllers (``controller``).
 
-``baseline``: LOS guidance (Fossen 2021 §12.4) → heading/speed law → constrained thrust
+``baseline``: LOS guidance (Fossen 2011 §10.3.2) → heading/speed law → constrained thrust
 allocation; ``nmpc``: Roboat II's NMPC tracking an A* reference through the mission's goals,
 thruster forces straight out; ``taxi``: a fleet boat of Roboat's ride service (Roboat II §III),
 its pilot feeding the NMPC. The NTNU explorer's ``explore`` lives in

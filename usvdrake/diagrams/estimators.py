@@ -77,7 +77,7 @@ def check_slam_estimate(s: Scenario, file: str) -> None:
 
 
 def add_observer(parts: AutonomyParts):
-    """The NTNU explorer's passive observer (Fossen 2021 §13.4) on the SLAM pose and the
+    """The NTNU explorer's passive observer (Fossen 2011 §11.4.1) on the SLAM pose and the
     allocation's achieved force; its bias estimate is exported and feeds the PD controller."""
     cfg = parts.scenario.exploration.observer
     xi = parts.vessel.hydrodynamics

@@ -1,6 +1,6 @@
 """The built-in SLAM methods of the autonomy (``slam.method``).
 
-``graph``: the sliding-window 2D lidar SLAM (Dang 2023-style, PLICP + Censi covariance + Barron
+``graph``: the sliding-window 2D lidar SLAM (Pham et al.: PLICP + Censi covariance + Barron
 kernel) on ``lidar_scan``; ``hector``: the NTNU explorer's Hector-style SLAM (Kohlbrecher 2011)
 on ``lidar_scan``; ``known_poses``: the exploration's ground-truth map source, the same scans
 inserted at the oracle's pose; ``factor_graph``: Roboat II's lidar-IMU-GPS factor graph on

@@ -3,85 +3,26 @@
 import json
 from pathlib import Path
 
-import numpy as np
 from pydrake.geometry import Meshcat
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput
 
-from usvdrake.analysis.metrics import (
-    control_estimation_metrics,
-    exploration_metrics,
-    mission_metrics,
-    slam3d_metrics,
-    slam_metrics,
-    vessel_clearance,
-)
 from usvdrake.diagrams.vessel_diagram import build_vessel_diagram
 from usvdrake.logs.mission_log import MissionLogWriter, add_mission_recorder
+from usvdrake.logs.run_summary import write_run_summary, write_scenario
 from usvdrake.run.fleet import run_fleet_mission
+from usvdrake.run.measure import (
+    SIGNALS,
+    Signal,
+    final_values,
+    measure_mission,
+    recorded_signal_ports,
+)
 from usvdrake.run.simulate import MissionResult, make_meshcat, simulate, write_tum
-from usvdrake.scenario import Scenario
-from usvdrake.systems.slam.slam_summary import Slam2DSummary, Slam3DSummary
+from usvdrake.scenario import Scenario, scenario_yaml
 from usvdrake.vessel import load_vessel
 from usvdrake.viz.report import write_report
 from usvdrake.worlds import make_world
-
-
-def _exploration_summary(scenario, vessel, world, finals, logs, times, states, clearance) -> dict:
-    """The NTNU explorer's metrics (:func:`exploration_metrics`) on the final SLAM map, with the
-    time the explorer declared the exploration finished and which map and pose it used."""
-    status_log = logs["explorer_status"]
-    status = status_log.data().T
-    done = np.flatnonzero(status[:, 2] > 0)
-    final = finals["explorer_status"]
-    finished_time = None
-    if len(done):
-        finished_time = float(status_log.sample_times()[done[0]])
-    elif final[2] > 0:  # finished after the last log sample: the run stopped right there
-        finished_time = float(finals["time"])
-    out = exploration_metrics(
-        times,
-        states,
-        vessel,
-        world,
-        finals["slam_map"],
-        scenario.exploration.explorer.resolution,
-        finished_time,
-        clearance,
-    )
-    out.update(
-        map_source=f"slam:{scenario.slam.method}",
-        pose_source="passive_observer(slam_pose)"
-        if scenario.estimator == "observer"
-        else "ground_truth (oracle)",
-        planning_cycles=int(final[3]),
-    )
-    return out
-
-
-# Ports whose values at the end of a run the metrics read (diagnostics, summaries, final maps)
-FINAL_PORTS = (
-    "mission_complete",
-    "nmpc_diagnostics",
-    "reference_track",
-    "nmhe_diagnostics",
-    "slam_summary",
-    "slam_map",
-    "explorer_status",
-)
-
-
-def final_values(vessel, context) -> dict:
-    """The exported :data:`FINAL_PORTS` the vessel diagram has, evaluated at the run's end
-    (plus ``time``): all the metrics read of the systems besides the logged signals."""
-    vessel_context = vessel.GetMyContextFromRoot(context)
-    finals = {"time": context.get_time()}
-    for name in FINAL_PORTS:
-        if name == "slam_map" and not vessel.HasOutputPort("explorer_status"):
-            continue  # rendering the map costs; only the exploration's coverage reads it
-        if vessel.HasOutputPort(name):
-            finals[name] = vessel.GetOutputPort(name).Eval(vessel_context)
-    return finals
 
 
 def run_mission(
@@ -113,30 +54,24 @@ def run_mission(
         "vessel", build_vessel_diagram(scenario, meshcat=meshcat, vessel=vessel, world=world)
     )
     period = 1.0 / scenario.visualization.rate_hz
-    logged = ["ground_truth_state", "reference", "thrust_applied", "state_estimate"]
-    logged += [
-        p
-        for p in (
-            "pose_measurement",
-            "nmhe_solve_ms",
-            "estimate_time",
-            "slam_pose",
-            "explorer_status",
-        )
-        if vessel_diagram.HasOutputPort(p)
-    ]
-    loggers = {
-        name: LogVectorOutput(vessel_diagram.GetOutputPort(name), builder, period)
-        for name in logged
-    }
-    for name, logger in loggers.items():
-        logger.set_name(f"log_{name}")
+    loggers = {}
+    for name in SIGNALS:
+        if vessel_diagram.HasOutputPort(name):
+            loggers[name] = LogVectorOutput(vessel_diagram.GetOutputPort(name), builder, period)
+            loggers[name].set_name(f"log_{name}")
     log_writer = None
     if out_dir is not None:
         Path(out_dir).mkdir(parents=True, exist_ok=True)
         # written while the simulation runs (flushed every 0.5 s): a crash keeps all but ~1 s
         log_writer = MissionLogWriter(Path(out_dir) / "log.mcap")
-        add_mission_recorder(builder, vessel_diagram, log_writer, scenario.visualization.rate_hz)
+        write_scenario(log_writer, scenario_yaml(scenario))
+        add_mission_recorder(
+            builder,
+            vessel_diagram,
+            log_writer,
+            scenario.visualization.rate_hz,
+            extra=recorded_signal_ports(vessel_diagram),
+        )
     diagram = builder.Build()
     diagram.set_name("mission")
 
@@ -156,6 +91,10 @@ def run_mission(
         )
         t, complete, wall = outcome.sim_time, outcome.done, outcome.wall_time
         context = outcome.simulator.get_context()
+        finals = final_values(vessel_diagram, context)
+        if log_writer is not None:  # what a replay of the log needs to measure it again
+            kept = {k: v for k, v in finals.items() if k != "reference_track"}  # rebuilt on replay
+            write_run_summary(log_writer, t, {**kept, "done": complete})
     finally:  # an interrupted or failed run still leaves a finished, readable log
         if log_writer is not None:
             log_writer.close()
@@ -165,50 +104,20 @@ def run_mission(
         viz.ForcedPublish(viz.GetMyContextFromRoot(context))
         viz.finish(viz.GetMyContextFromRoot(context))
 
-    logs = {name: lg.FindLog(context) for name, lg in loggers.items()}
-    times = logs["ground_truth_state"].sample_times()
-    states = logs["ground_truth_state"].data().T
-    reference = logs["reference"].data().T
-    thrust = logs["thrust_applied"].data().T
-    finals = final_values(vessel_diagram, context)
-    metrics = {
-        "scenario": scenario.name,
-        "vessel": scenario.vessel,
-        "world": scenario.world,
-        "seed": scenario.seed,
-        "estimator": scenario.estimator,
-        "sim_time_s": float(t),
-        "wall_time_s": float(wall),
-        "realtime_factor": float(t / wall) if wall > 0 else float("inf"),
-        "mission_complete": bool(complete or finals["mission_complete"][0] > 0),
+    signals = {
+        name: Signal(lg.FindLog(context).sample_times(), lg.FindLog(context).data().T)
+        for name, lg in loggers.items()
     }
-    clearance = vessel_clearance(world, states, vessel)  # once: several metrics read it
-    goals = np.asarray(scenario.mission.waypoints)
-    metrics.update(
-        mission_metrics(times, states, reference, thrust, vessel, world, goals, clearance)
-    )
-
-    metrics.update(
-        control_estimation_metrics(
-            times,
-            states,
-            logs["state_estimate"].data().T,
-            finals,
-            logs["pose_measurement"].data().T if "pose_measurement" in logs else None,
-            logs["nmhe_solve_ms"].data().ravel() if "nmhe_solve_ms" in logs else None,
-            logs["estimate_time"].data().ravel() if "estimate_time" in logs else None,
-        )
-    )
-    summary = finals.get("slam_summary")
-    if isinstance(summary, Slam2DSummary):
-        metrics.update(slam_metrics(times, states, logs["slam_pose"].data().T, summary))
-    elif isinstance(summary, Slam3DSummary):
-        metrics.update(slam3d_metrics(times, states, logs["slam_pose"].data().T, summary))
-    if "explorer_status" in finals:
-        metrics.update(
-            _exploration_summary(scenario, vessel, world, finals, logs, times, states, clearance)
-        )
-
+    measured = measure_mission(scenario, vessel, world, signals, finals, complete)
+    metrics = {}
+    for key, value in measured.items():  # the wall clock's two numbers beside the sim time
+        metrics[key] = value
+        if key == "sim_time_s":
+            metrics["wall_time_s"] = float(wall)
+            metrics["realtime_factor"] = float(t / wall) if wall > 0 else float("inf")
+    times, states = signals["ground_truth_state"].times, signals["ground_truth_state"].values
+    reference = signals["reference"].values
+    thrust = signals["thrust_applied"].values
     result = MissionResult(metrics, times, states, reference, thrust)
     if out_dir is not None:
         out = Path(out_dir)
