@@ -108,16 +108,22 @@ def test_ablation_has_the_three_variants_and_the_water_level_graph(variants, tmp
 
 
 def test_cli_slam3d_prints_metrics_json(survey, tmp_path, capsys):
+    """--json prints the metrics as JSON; without it, one aligned line per metric."""
     _, live = survey
     out = tmp_path / "out"
     code = main(["slam3d", str(live.files["log"]), "--scenario", "canal_survey", "--quiet"]
-                + ["--no-loop", "--out", str(out)])  # fmt: skip
+                + ["--no-loop", "--out", str(out), "--json"])  # fmt: skip
     assert code == 0
     m = json.loads(capsys.readouterr().out)
     assert m["ate_m"] < 0.5 and m["use_loop_closure"] is False and m["use_gps"] is True
     assert json.loads((out / "metrics.json").read_text())["ate_m"] == m["ate_m"]
     tum = np.loadtxt(out / "trajectory.tum")
     assert tum.shape == (m["slam_keyframes"], 8)
+    assert (
+        main(["slam3d", str(live.files["log"]), "--scenario", "amsterdam_sensors", "--quiet"]) == 0
+    )
+    text = capsys.readouterr().out
+    assert text.startswith("usvdrake slam3d") and "ate_m" in text and "{" not in text
 
 
 def test_missing_file_is_a_clear_error(tmp_path, capsys):

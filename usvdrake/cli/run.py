@@ -3,6 +3,7 @@
 import sys
 import time
 
+from usvdrake.cli._format import num
 from usvdrake.diagrams import load_scenario, with_overrides
 from usvdrake.run.fleet import fleet_summary
 from usvdrake.run.mission import run_mission
@@ -10,26 +11,69 @@ from usvdrake.run.simulate import make_meshcat
 
 
 def _summary(result, scenario) -> str:
+    """One screen: what ran, how fast, whether the mission completed (and why not), how well it
+    went, what was written where."""
     m = result.metrics
+    complete = m["mission_complete"]
+    why = ""
+    if not complete and m["sim_time_s"] >= scenario.duration - 1e-6:
+        why = f" (stopped at the duration, {scenario.duration:g} s)"
+    mission = f"  mission {'COMPLETE' if complete else 'NOT complete'}{why}: "
+    mission += f"path {num(m['path_length_m'], '.1f', ' m')}"
+    if m.get("final_distance_to_goal_m") is not None:
+        mission += f", final distance to goal {num(m['final_distance_to_goal_m'], '.2f', ' m')}"
     lines = [
         f"usvdrake run {scenario.name}: {scenario.description}".rstrip(": "),
         f"  vessel {m['vessel']} in world {m['world']} "
         f"(seed {m['seed']}, estimator {m['estimator']})",
         f"  simulated {m['sim_time_s']:.1f} s in {m['wall_time_s']:.1f} s wall "
         f"= {m['realtime_factor']:.1f}x real time",
-        f"  mission {'COMPLETE' if m['mission_complete'] else 'NOT complete'}: "
-        f"path {m['path_length_m']:.1f} m, "
-        f"final distance to goal {m['final_distance_to_goal_m']:.2f} m",
-        f"  cross-track RMSE {m['cross_track_rmse_m']:.2f} m (max {m['cross_track_max_m']:.2f} m), "
-        f"mean speed {m['mean_speed_mps']:.2f} m/s",
-        (
-            f"  min clearance to obstacles {m['min_clearance_m']:.2f} m, "
-            if m["min_clearance_m"] is not None
-            else "  no obstacles, "
-        )
-        + f"collision samples {m['collision_samples']}, "
-        f"thrust saturated {100 * m['thrust_saturated_fraction']:.0f} % of the time",
+        mission,
     ]
+    if m.get("cross_track_rmse_m") is not None:
+        lines.append(
+            f"  cross-track RMSE {num(m['cross_track_rmse_m'], '.2f', ' m')} "
+            f"(max {num(m.get('cross_track_max_m'), '.2f', ' m')}), "
+            f"mean speed {num(m.get('mean_speed_mps'), '.2f', ' m/s')}"
+        )
+    if m.get("position_rmse_m") is not None:
+        lines.append(
+            f"  tracking RMSE {num(m['position_rmse_m'], '.3f', ' m')}, heading "
+            f"{num(m.get('heading_rmse_rad'), '.3f', ' rad')}; NMPC "
+            f"{m.get('nmpc_solves', 0)} solves, {m.get('nmpc_failures', 0)} failed, median "
+            f"{num(m.get('nmpc_solve_ms_median'), '.1f', ' ms')}"
+        )
+    if m.get("nmhe_velocity_rmse_mps") is not None:
+        lines.append(
+            f"  NMHE velocity RMSE {num(m['nmhe_velocity_rmse_mps'], '.4f', ' m/s')}, "
+            f"{m.get('nmhe_failures', 0)} failed solves"
+        )
+    if m.get("ate_m") is not None:
+        lines.append(
+            f"  SLAM ATE {num(m['ate_m'], '.3f', ' m')} online"
+            + (f", {num(m['ate_final_m'], '.3f', ' m')} final" if "ate_final_m" in m else "")
+            + (f", RPE {num(m['rpe_m'], '.3f', ' m')} per metre" if m.get("rpe_m") else "")
+        )
+    if m.get("explored_fraction") is not None:
+        lines.append(
+            f"  explored {100 * m['explored_fraction']:.0f} % of the reachable water "
+            f"({num(m.get('explored_area_m2'), '.0f', ' m²')} of "
+            f"{num(m.get('reachable_free_area_m2'), '.0f', ' m²')})"
+            + (
+                f" in {num(m['exploration_time_s'], '.0f', ' s')}"
+                if m.get("exploration_time_s") is not None
+                else ""
+            )
+        )
+    clearance = (
+        f"  min clearance to obstacles {num(m['min_clearance_m'], '.2f', ' m')}, "
+        if m.get("min_clearance_m") is not None
+        else "  no obstacles, "
+    )
+    lines.append(
+        clearance + f"collision samples {m.get('collision_samples', 0)}, thrust saturated "
+        f"{100 * (m.get('thrust_saturated_fraction') or 0.0):.0f} % of the time"
+    )
     for name, path in result.files.items():
         lines.append(f"  {name:<10} {path}")
     return "\n".join(lines)

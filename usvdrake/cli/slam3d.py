@@ -5,6 +5,7 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+from usvdrake.cli._format import table
 from usvdrake.diagrams import load_scenario
 from usvdrake.diagrams.slam import settings_from_scenario
 from usvdrake.errors import ConfigError
@@ -22,8 +23,13 @@ def slam3d_settings(scenario=None):
         return config, list(s.sensors.lidar3d.mount), "amsterdam"
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)
-    if scenario.slam.method != "factor_graph":
-        raise ConfigError(scenario.name, "slam.method", "factor_graph", repr(scenario.slam.method))
+    if "lidar3d" not in scenario.sensors.enabled:  # its recordings have no sweeps to map
+        raise ConfigError(
+            scenario.name,
+            "sensors.enabled",
+            "a scenario with a 3D lidar ('lidar3d' in the list)",
+            repr(scenario.sensors.enabled),
+        )
     return settings_from_scenario(scenario)
 
 
@@ -44,11 +50,13 @@ def add_arguments(s3) -> None:
     s3.add_argument("--no-gps", action="store_true", help="no GPS factors")
     s3.add_argument("--no-loop", action="store_true", help="no loop closures")
     s3.add_argument("--quiet", action="store_true", help="no progress bar")
+    s3.add_argument("--json", action="store_true", help="print the metrics as JSON instead")
 
 
 def run(args) -> int:
-    """000 §V's lidar-IMU-GPS SLAM on a recording: metrics JSON to stdout; with --out,
-    DIR/metrics.json and DIR/trajectory.tum (keyframes, final estimates)."""
+    """Roboat II §V's lidar-IMU-GPS SLAM on a recording: a one-screen summary (or the metrics
+    as JSON with --json); with --out, DIR/metrics.json and DIR/trajectory.tum (keyframes,
+    final estimates)."""
     if not Path(args.log).exists():
         raise ConfigError(
             args.log, "", "a mission log (.mcap or run folder) or a ROS 1/2 bag", "no such file"
@@ -70,11 +78,15 @@ def run(args) -> int:
         gps_topic=args.gps_topic,
     )
     text = json.dumps(result.metrics, indent=2)
-    print(text)
+    if args.json:
+        print(text)
+    else:
+        print(f"usvdrake slam3d {args.log}: {result.metrics.get('slam_keyframes', 0)} keyframes")
+        print("\n".join(table(result.metrics)))
     if args.out:
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
         (out / "metrics.json").write_text(text + "\n")
         write_keyframes_tum(out / "trajectory.tum", result)
-        print(f"  metrics.json, trajectory.tum in {out}", file=sys.stderr)
+        print(f"  metrics.json, trajectory.tum in {out}", file=sys.stderr if args.json else None)
     return 0

@@ -48,7 +48,7 @@ def run_mission(
     vessel = load_vessel(scenario.vessel)
     world = make_world(scenario.world, scenario.seed)
     if meshcat is None and record and out_dir is not None:
-        meshcat = make_meshcat()
+        meshcat = make_meshcat(announce=False)  # for the replay only
     builder = DiagramBuilder()
     vessel_diagram = builder.AddNamedSystem(
         "vessel", build_vessel_diagram(scenario, meshcat=meshcat, vessel=vessel, world=world)

@@ -6,6 +6,7 @@ the wall time. :func:`make_meshcat` and :func:`write_tum` are the small output h
 runners share.
 """
 
+import logging
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,13 +20,22 @@ from tqdm import tqdm
 from usvdrake.scenario import SimulationConfig
 
 
-def make_meshcat(port: int | None = None) -> Meshcat:
-    """A Meshcat server bound to localhost only (never exposed on the network)."""
+def make_meshcat(port: int | None = None, announce: bool = True) -> Meshcat:
+    """A Meshcat server bound to localhost only (never exposed on the network). ``announce``:
+    let Drake print its "listening at" line (False for a Meshcat that only records the
+    replay: nobody is meant to connect to it)."""
     params = MeshcatParams()
     params.host = "localhost"
     if port is not None:
         params.port = port
-    return Meshcat(params)
+    drake_log = logging.getLogger("drake")
+    level = drake_log.level
+    if not announce:
+        drake_log.setLevel(logging.WARNING)
+    try:
+        return Meshcat(params)
+    finally:
+        drake_log.setLevel(level)
 
 
 @dataclass
