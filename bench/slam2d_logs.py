@@ -72,7 +72,13 @@ def main() -> None:
         parser.error("--odometry needs --raw: a corrected log's pose fields are its reference")
     data = Path(args.data)
     if not data.is_dir():
-        raise SystemExit(f"slam2d_logs: no directory {data} (pass --data)")
+        raise SystemExit(
+            f"slam2d_logs: no directory {data}. The logs are the CARMEN building logs of "
+            "Kümmerle et al. 2009's SLAM evaluation (raw: MOLAorg/mola_test_datasets, "
+            "datasets/radish, CC-BY 3.0; corrected: acschaefer/ple, GPL-3.0); put "
+            "NAME-corrected.log.gz (and the raw NAME.clf.bz2 beside them for --raw) in one "
+            "folder and pass it as --data"
+        )
     results = {}
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(args.out) if args.out else Path(tmp)
