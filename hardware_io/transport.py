@@ -10,6 +10,7 @@ most every ``reconnect_period`` seconds, returning ``b""`` meanwhile.
 from __future__ import annotations
 
 import os
+import socket
 import time
 
 import serial
@@ -140,8 +141,6 @@ class UdpTransport:
     RCVBUF_BYTES = 4 * 1024 * 1024
 
     def __init__(self, address: str = "0.0.0.0", port: int = 2368, max_datagrams: int = 1000):
-        import socket
-
         if max_datagrams < 1:
             raise ValueError(f"max_datagrams must be positive, got {max_datagrams}")
         self.address, self.max_datagrams = address, int(max_datagrams)

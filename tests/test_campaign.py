@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 import usvdrake.run.campaign as campaign_mod
-import usvdrake.run.mission
 from usvdrake.cli import main
 from usvdrake.diagrams import check_scenario, load_scenario, with_overrides
 from usvdrake.diagrams.vessel_diagram import build_vessel_diagram
@@ -114,7 +113,7 @@ def test_failed_runs_are_recorded_not_fatal(monkeypatch, tmp_path):
     (An in-process cluster via ``scheduler=`` so that the monkeypatches reach the worker.)"""
     from dask.distributed import LocalCluster
 
-    real_run, real_randomise = usvdrake.run.mission.run_mission, campaign_mod.randomise
+    real_run, real_randomise = campaign_mod.run_mission, campaign_mod.randomise
     calls = []
 
     def flaky_run(scenario, **kw):
@@ -128,7 +127,7 @@ def test_failed_runs_are_recorded_not_fatal(monkeypatch, tmp_path):
             raise ConfigError("test", "initial_state", "free water", "land")
         return real_randomise(scenario, rng, ranges)
 
-    monkeypatch.setattr(usvdrake.run.mission, "run_mission", flaky_run)
+    monkeypatch.setattr(campaign_mod, "run_mission", flaky_run)
     monkeypatch.setattr(campaign_mod, "randomise", flaky_randomise)
     with LocalCluster(
         n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None

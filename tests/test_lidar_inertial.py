@@ -9,12 +9,11 @@ from usvdrake.sensors.lidar_model import LidarConfig, LidarModel, body_motion, p
 from usvdrake.sensors.messages import ImuSample
 from usvdrake.systems.slam.lidar_inertial import (
     ImuPropagator,
-    deskew,
     level_rotation,
     planar_pose,
     pose_matrix,
 )
-from usvdrake.systems.slam.scan_registration3d import so3_exp
+from usvdrake.systems.slam.scan_registration3d import deskew, so3_exp
 from usvdrake.worlds import make_world
 
 

@@ -18,11 +18,12 @@ CAPS = {"--duration": 10.0, "--runs": 2, "--samples": 500, "--trials": 2}
 
 
 def readme_commands() -> list[str]:
-    """The ``usvdrake`` command lines inside the README's fenced code blocks."""
+    """The ``usvdrake`` command lines inside the README's ```bash blocks (plain blocks show
+    output, not commands)."""
     commands, fenced = [], False
     for line in README.read_text().splitlines():
         if line.startswith("```"):
-            fenced = not fenced
+            fenced = not fenced and line.strip() in ("```bash", "```sh")
             continue
         text = line.split("#", 1)[0].strip()
         if fenced and re.match(r"^(\.venv/bin/)?usvdrake\s", text):

@@ -42,6 +42,7 @@ from hardware_io.emulators.pty_link import PtyDevice, WireFaults
 from usvdrake.diagrams import load_scenario
 from usvdrake.diagrams.station import make_sim_station
 from usvdrake.scenario import Scenario
+from usvdrake.sensors.lidar_model import sample_rate
 from usvdrake.sensors.pose_sensor import PoseSensorConfig
 from usvdrake.vessel import load_vessel
 from usvdrake.worlds import make_world
@@ -112,8 +113,6 @@ class Rig:
             if device.HasInputPort(port):
                 builder.Connect(station.GetOutputPort(port), device.GetInputPort(port))
         if "lidar2d" in self.ptys:
-            from usvdrake.sensors.lidar_model import sample_rate
-
             lidar_cfg = scenario.sensors.lidar2d
             rate = sample_rate(lidar_cfg)
             lidar = builder.AddNamedSystem(

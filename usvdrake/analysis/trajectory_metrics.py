@@ -26,6 +26,8 @@ from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
+from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
 from scipy.spatial.transform import Rotation
 
 TUM_HEADER = "t x y z qx qy qz qw"
@@ -344,9 +346,6 @@ def plot_ate(
     their error and a line from each to its reference position; right, the error pose by pose
     (``index_label`` names the axis) with its RMSE. Returns ``path``. Drawn on a bare
     :class:`~matplotlib.figure.Figure`: the caller's pyplot backend is left alone."""
-    from matplotlib.collections import LineCollection
-    from matplotlib.figure import Figure
-
     aligned, ref = as_trajectory(aligned), as_trajectory(ref)
     e = np.asarray(errors, float)
     pe, pr = aligned.poses[:, :2, 3], ref.poses[:, :2, 3]

@@ -4,9 +4,17 @@ from pydrake.geometry import Meshcat
 from pydrake.systems.framework import Diagram, DiagramBuilder
 
 from usvdrake.diagrams.autonomy import make_autonomy
+from usvdrake.diagrams.hardware_station import make_hardware_station
 from usvdrake.diagrams.station import make_sim_station
 from usvdrake.scenario import Scenario
 from usvdrake.vessel import VesselParams, load_vessel
+from usvdrake.viz.exploration_visualizer import ExplorationVisualizer
+from usvdrake.viz.lidar_visualizer import LidarVisualizer
+from usvdrake.viz.meshcat_world import draw_occupancy, draw_world, look_at
+from usvdrake.viz.occupancy_visualizer import OccupancyVisualizer
+from usvdrake.viz.point_map_visualizer import KeyframeMapVisualizer
+from usvdrake.viz.trajectory_visualizer import TrajectoryVisualizer, draw_reference
+from usvdrake.viz.vessel_visualizer import VesselVisualizer
 from usvdrake.worlds import make_world
 from usvdrake.worlds.world import World
 
@@ -62,8 +70,6 @@ def build_vessel_diagram(
     if hardware is None:
         station_system = make_sim_station(scenario, vessel, world)
     else:
-        from usvdrake.diagrams.hardware_station import make_hardware_station
-
         hw = scenario.hardware if hardware is True else hardware
         station_system = make_hardware_station(scenario, vessel, world, hw, needs)
     station = builder.AddNamedSystem("station", station_system)
@@ -101,10 +107,6 @@ def build_vessel_diagram(
             if station.HasOutputPort("ground_truth_state")
             else autonomy.GetOutputPort("state_estimate")
         )
-        from usvdrake.viz.lidar_visualizer import LidarVisualizer
-        from usvdrake.viz.meshcat_world import draw_occupancy, draw_world, look_at
-        from usvdrake.viz.vessel_visualizer import VesselVisualizer
-
         viz_cfg = scenario.visualization
         index = [v.name for v in scenario.fleet.vessels].index(member) if member else 0
         if index == 0:
@@ -112,8 +114,6 @@ def build_vessel_diagram(
             if viz_cfg.occupancy_resolution > 0:
                 draw_occupancy(meshcat, world.occupancy(viz_cfg.occupancy_resolution))
         if autonomy.HasOutputPort("predicted_trajectory"):
-            from usvdrake.viz.trajectory_visualizer import TrajectoryVisualizer, draw_reference
-
             nmpc = autonomy.GetSubsystemByName("nmpc")
             if nmpc.reference is not None:
                 draw_reference(meshcat, nmpc.reference)
@@ -125,18 +125,12 @@ def build_vessel_diagram(
                 autonomy.GetOutputPort("predicted_trajectory"), pred.GetInputPort("trajectory")
             )
         if autonomy.HasOutputPort("slam_map"):
-            from usvdrake.viz.occupancy_visualizer import OccupancyVisualizer
-
             slam_map = builder.AddNamedSystem("slam_map_visualizer", OccupancyVisualizer(meshcat))
             builder.Connect(autonomy.GetOutputPort("slam_map"), slam_map.GetInputPort("map"))
         if autonomy.HasOutputPort("slam_map3d"):
-            from usvdrake.viz.point_map_visualizer import KeyframeMapVisualizer
-
             map3d = builder.AddNamedSystem("slam_map3d_visualizer", KeyframeMapVisualizer(meshcat))
             builder.Connect(autonomy.GetOutputPort("slam_map3d"), map3d.GetInputPort("map"))
         if autonomy.HasOutputPort("path"):
-            from usvdrake.viz.exploration_visualizer import ExplorationVisualizer
-
             ex_viz = builder.AddNamedSystem(
                 "exploration_visualizer", ExplorationVisualizer(meshcat)
             )

@@ -11,6 +11,8 @@ from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
+from rosbags.highlevel import AnyReader
+from rosbags.typesys import Stores, get_typestore
 
 from usvdrake.sensors.messages import LaserScan
 from usvdrake.typed_yaml import ConfigError
@@ -47,9 +49,6 @@ def to_laser_scan(msg, stamp: float) -> LaserScan:
 
 
 def read_bag_scans(path: str | Path, topic: str | None = None) -> Iterator[BagScan]:
-    from rosbags.highlevel import AnyReader
-    from rosbags.typesys import Stores, get_typestore
-
     path = Path(path)
     if not is_bag(path):
         raise ConfigError(path, "", "a ROS 1 .bag file or a ROS 2 bag folder", "neither")

@@ -47,6 +47,8 @@ from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
+from rosbags.highlevel import AnyReader
+from rosbags.typesys import Stores, get_typestore
 
 from usvdrake.logs.mission_log import log_summary, read_log_states, read_mission_log
 from usvdrake.logs.rosbag import is_bag
@@ -299,9 +301,6 @@ _BAG_TYPES = {"lidar": POINT_CLOUD2, "imu": IMU, "gps": NAV_SAT_FIX}
 
 
 def _open_bag(path: Path):
-    from rosbags.highlevel import AnyReader
-    from rosbags.typesys import Stores, get_typestore
-
     # used only for bags without message definitions (ROS 2 bags before Iron): ROS 1 bags
     # carry them, and ROS 1 and ROS 2 std_msgs/Header differ (seq)
     store = Stores.ROS1_NOETIC if path.suffix == ".bag" else Stores.ROS2_HUMBLE

@@ -60,12 +60,19 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
+import dask
 import numpy as np
+from dask.distributed import Client, LocalCluster, as_completed
+from matplotlib.figure import Figure
+from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
+from tqdm import tqdm
 
 from usvdrake.diagrams import check_scenario, with_overrides
 from usvdrake.jsonable import jsonable
+from usvdrake.run.mission import run_mission
 from usvdrake.scenario import Scenario
 from usvdrake.typed_yaml import ConfigError
+from usvdrake.vessel import load_vessel
 from usvdrake.viz.report import png_base64
 
 WORKER_ENV = {  # one thread per worker for every numeric library: K workers use K cores
@@ -158,8 +165,6 @@ def randomise(scenario: Scenario, rng: np.random.Generator, ranges: Ranges = RAN
 
     Draws until the variant passes :func:`usvdrake.scenario.check_scenario` (start and
     waypoints in free water of the variant's world); ConfigError after ``ranges.max_draws``."""
-    from usvdrake.vessel import load_vessel
-
     hull_length = load_vessel(scenario.vessel).hull.length
     error = None
     for _ in range(ranges.max_draws):
@@ -205,15 +210,11 @@ def draw_summary(base: Scenario, s: Scenario) -> dict:
 
 def scenario_yaml(s: Scenario) -> str:
     """The complete YAML of ``s`` (floats in shortest round-trip form: it reloads exactly)."""
-    from pydrake.common.yaml import yaml_dump_typed
-
     return yaml_dump_typed(s)
 
 
 def scenario_from_yaml(text: str, file: str = "scenario") -> Scenario:
     """Parse and validate scenario YAML text (the same values ``load_scenario`` gives)."""
-    from pydrake.common.yaml import yaml_load_typed
-
     return check_scenario(yaml_load_typed(schema=Scenario, data=text, defaults=Scenario()), file)
 
 
@@ -221,8 +222,6 @@ def run_one(index: int, text: str) -> dict:
     """The Dask task: simulate one run's scenario YAML; never raises (errors are the result)."""
     t0 = (time.perf_counter(), time.process_time())
     try:
-        from usvdrake.run.mission import run_mission
-
         metrics = run_mission(scenario_from_yaml(text, f"run {index}"), record=False).metrics
         return {"status": "completed", "error": None, "metrics": metrics, **_took(t0)}
     except Exception as e:  # noqa: BLE001 — any failure is the run's result
@@ -251,9 +250,6 @@ def _failed(e: BaseException, tb: str | None = None, **extra) -> dict:
 
 @contextmanager
 def _dask_client(workers: int, scheduler: str | None):
-    import dask
-    from dask.distributed import Client, LocalCluster
-
     if scheduler:
         try:
             client = Client(scheduler, timeout="10s")
@@ -357,8 +353,6 @@ def run_campaign(
 
     if texts:
         with _dask_client(workers, scheduler) as client:
-            from dask.distributed import as_completed
-
             tag = uuid.uuid4().hex[:12]  # fresh task keys: never a cached result of another run
             futures = {
                 client.submit(run_one, i, text, key=f"usvdrake-run-{i:04d}-{tag}"): i
@@ -366,8 +360,6 @@ def run_campaign(
             }
             bar = None
             if progress:
-                from tqdm import tqdm
-
                 bar = tqdm(total=runs, unit="run", desc=f"campaign {base.name}")
                 bar.update(runs - len(texts))
             for future in as_completed(futures):
@@ -467,8 +459,6 @@ def summarise(rows: list[dict]) -> dict:
 
 
 def _histogram_png(key: str, values: np.ndarray) -> str:
-    from matplotlib.figure import Figure
-
     fig = Figure(figsize=(4.2, 2.8))
     ax = fig.subplots()
     bins = min(30, max(5, int(np.sqrt(len(values))) + 1))

@@ -6,12 +6,14 @@ from pathlib import Path
 
 import numpy as np
 import shapely
+from matplotlib.figure import Figure
 from pydrake.geometry import Meshcat
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput
 
 from usvdrake.analysis.metrics import vessel_clearance
 from usvdrake.diagrams.fleet_diagram import build_fleet_diagram
+from usvdrake.diagrams.vessel_diagram import FLEET_COLORS
 from usvdrake.run.simulate import MissionResult, make_meshcat, simulate
 from usvdrake.scenario import Scenario
 from usvdrake.systems.guidance.taxi_pilot import PHASES
@@ -62,7 +64,7 @@ def run_fleet_mission(
     vessel = load_vessel(scenario.vessel)
     world = make_world(scenario.world, scenario.seed)
     if meshcat is None and record and out_dir is not None:
-        meshcat = make_meshcat()
+        meshcat = make_meshcat(announce=False)  # for the replay only
     builder = DiagramBuilder()
     fleet = builder.AddNamedSystem("fleet", build_fleet_diagram(scenario, meshcat, vessel, world))
     names = [v.name for v in scenario.fleet.vessels]
@@ -187,14 +189,8 @@ def run_fleet_mission(
 
 def plot_fleet(path, world, tracks: dict, ledger, names: list[str], title: str) -> None:
     """The canals, each boat's track in its colour, pickups (o) and destinations (x)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from usvdrake.diagrams.vessel_diagram import FLEET_COLORS
-
-    fig, ax = plt.subplots(figsize=(9, 8))
+    fig = Figure(figsize=(9, 8))
+    ax = fig.subplots()
     water = world.water
     for poly in getattr(water, "geoms", [water]):
         ax.fill(*poly.exterior.xy, color="#cfe3f3", lw=0)
@@ -216,7 +212,6 @@ def plot_fleet(path, world, tracks: dict, ledger, names: list[str], title: str) 
     ax.legend(loc="best")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def fleet_summary(metrics: dict, out_dir=None) -> str:

@@ -13,9 +13,21 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from matplotlib.image import imsave
+from tqdm import tqdm
 
+from usvdrake.analysis.trajectory_metrics import (
+    ate_errors,
+    ate_summary,
+    plot_ate,
+    trajectory_from_planar,
+    write_tum,
+)
 from usvdrake.logs.carmen import associate_scans, read_carmen
+from usvdrake.logs.mission_log import read_log_scans, read_log_states
+from usvdrake.logs.rosbag import is_bag, read_bag_scans
 from usvdrake.systems.slam.graph_slam import GraphSlam, GraphSlamConfig, compose
+from usvdrake.typed_yaml import ConfigError
 
 GARBAGE_KINDS = ("random", "half_empty", "nan")
 
@@ -193,8 +205,6 @@ def run_graph_slam(
     stamps, anchors = [], []
     iterator = scans
     if progress:
-        from tqdm import tqdm
-
         iterator = tqdm(scans, unit="scan")
     now = started = due = -np.inf
     steps = slam.stats.setdefault("offline_step_ms", [])
@@ -271,21 +281,9 @@ def run_slam2d(
     ``config`` says. ``odometry``: use a raw CARMEN log's wheel odometry (the laser's pose
     fields of its FLASER lines; :meth:`GraphSlam.process`) — not a scan-only run, and
     meaningless on a "corrected" log, whose pose fields are the reference itself."""
-    from usvdrake.analysis.trajectory_metrics import (
-        ate_errors,
-        ate_summary,
-        plot_ate,
-        trajectory_from_planar,
-        write_tum,
-    )
-    from usvdrake.logs.rosbag import is_bag, read_bag_scans
-    from usvdrake.typed_yaml import ConfigError
-
     log = Path(log)
     base = STREAM_CONFIG
     if log.suffix == ".mcap":
-        from usvdrake.logs.mission_log import read_log_scans
-
         scans = read_log_scans(log)
     elif is_bag(log):
         scans = list(read_bag_scans(log))
@@ -419,8 +417,6 @@ def _reference_pairs(scans, stamps, poses, reference):
     pairs scan by scan (how = "scan", stamped by the reference's order); otherwise (a mission
     log, another recording) the ATE associates by time stamp (how = "time")."""
     if Path(reference).suffix == ".mcap":
-        from usvdrake.logs.mission_log import read_log_states
-
         t_ref, states = read_log_states(reference)
         return stamps, poses, t_ref, states[:, :3], "time"
     ref = list(read_carmen(reference, pose="laser"))
@@ -435,11 +431,6 @@ def _reference_pairs(scans, stamps, poses, reference):
 
 
 def _write_map_png(path: Path, grid) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     img = np.full(grid.data.shape, 0.75)
     img[grid.data == 0] = 1.0
     img[grid.data == 100] = 0.0
@@ -452,4 +443,4 @@ def _write_map_png(path: Path, grid) -> None:
         m = int(np.ceil(2.0 / grid.resolution))
         r0, c0 = max(rows.min() - m, 0), max(cols.min() - m, 0)
         img = img[r0 : rows.max() + m + 1, c0 : cols.max() + m + 1]
-    plt.imsave(path, img[::-1], cmap="gray", vmin=0.0, vmax=1.0)
+    imsave(path, img[::-1], cmap="gray", vmin=0.0, vmax=1.0)

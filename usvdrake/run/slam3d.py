@@ -26,8 +26,11 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
+from matplotlib.figure import Figure
+from tqdm import tqdm
 
 from usvdrake.analysis.metrics import slam3d_counts, slam3d_metrics
+from usvdrake.analysis.trajectory_metrics import write_tum, xyz_quat_from_se3
 from usvdrake.logs.sensor_stream import SensorMessage, read_ground_truth, read_sensor_stream
 from usvdrake.sensors.geodesy import LocalFrame
 from usvdrake.systems.slam.factor_graph_slam import MIN_CLOUD_POINTS, mount_matrix
@@ -181,8 +184,6 @@ def run_slam3d(
     it = messages()
     bar = None
     if progress:
-        from tqdm import tqdm
-
         bar = tqdm(unit="msg", desc=f"slam3d {description or path.name}")
     gt_t = truth[0] if truth is not None else np.zeros(0)
     online = np.zeros((len(gt_t), 3))
@@ -330,12 +331,8 @@ def plot_ablation(
 ) -> Path:
     """PNG of the variants' keyframe trajectories (final estimates) over ground truth in x-y
     (left) and their height z over time (right; the truth is at 0). Returns ``path``."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, (ax_xy, ax_z) = plt.subplots(1, 2, figsize=(13, 5.5))
+    fig = Figure(figsize=(13, 5.5))
+    ax_xy, ax_z = fig.subplots(1, 2)
     if truth is not None and len(truth[0]):
         t, s = truth
         ax_xy.plot(s[:, 0], s[:, 1], color="0.6", lw=3, label="ground truth")
@@ -358,14 +355,11 @@ def plot_ablation(
     fig.tight_layout()
     path = Path(path)
     fig.savefig(path, dpi=120)
-    plt.close(fig)
     return path
 
 
 def write_keyframes_tum(path: str | Path, result: Slam3DResult) -> Path:
     """The keyframes' final estimates as a TUM file (``t x y z qx qy qz qw``)."""
-    from usvdrake.analysis.trajectory_metrics import write_tum, xyz_quat_from_se3
-
     xyz, q = xyz_quat_from_se3(result.keyframe_poses)
     write_tum(path, result.keyframe_times, xyz, q)
     return Path(path)

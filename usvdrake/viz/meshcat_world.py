@@ -6,6 +6,7 @@ import shapely
 from pydrake.geometry import Meshcat, Rgba
 from scipy.spatial import ConvexHull, HalfspaceIntersection
 
+from usvdrake.viz.lidar_visualizer import to_drake_cloud
 from usvdrake.worlds.solids import Solid
 from usvdrake.worlds.world import World
 
@@ -122,8 +123,6 @@ def draw_world(meshcat: Meshcat, world: World, show_gps_denied: bool = True) -> 
 
 def draw_occupancy(meshcat: Meshcat, grid, path: str = "/world/occupancy") -> None:
     """Occupied cells of an :class:`~usvdrake.worlds.world.OccupancyGrid` as points at z = 0.05."""
-    from usvdrake.viz.lidar_visualizer import to_drake_cloud
-
     rows, cols = np.nonzero(grid.data == grid.OCCUPIED)
     xs, ys = grid.cell_centres()
     pts = np.column_stack([xs[cols], ys[rows], np.full(len(rows), 0.05)])

@@ -6,10 +6,14 @@ counts, times, whether the footer is there) without decoding it; :func:`read_log
 and arrays."""
 
 import json
+import struct
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
+from mcap.exceptions import EndOfFile
+from mcap.records import Channel, Footer, Message, Schema
+from mcap.stream_reader import StreamReader
 
 from usvdrake.logs.mission_log.codecs import decode_cloud, decode_gps, decode_imu, decode_scan
 from usvdrake.logs.mission_log.schema import (
@@ -30,11 +34,6 @@ from usvdrake.sensors.messages import LaserScan
 def _iter_records(path: str | Path):
     """The records of an MCAP file, finished or not: stops quietly at the end of the last
     complete record of a file that was cut off (a crashed writer)."""
-    import struct
-
-    from mcap.exceptions import EndOfFile
-    from mcap.stream_reader import StreamReader
-
     with open(path, "rb") as f:
         try:
             yield from StreamReader(f, skip_magic=False).records
@@ -61,8 +60,6 @@ def _decoder(schema_name: str, message_encoding: str):
 
 
 def _read_unsorted(path, topics) -> Iterator[tuple[int, int, str, object]]:
-    from mcap.records import Channel, Message, Schema
-
     schemas: dict[int, str] = {}
     channels: dict[int, tuple[str, object]] = {}
     for seq, record in enumerate(_iter_records(path)):
@@ -100,8 +97,6 @@ def log_summary(path: str | Path) -> dict:
     """What a mission log holds, without decoding it: ``{"complete": bool (the footer is there:
     the writer was closed), "messages": n, "first_time"/"last_time": s or None, "topics": {topic:
     {"schema", "encoding", "messages", "first_time", "last_time"}}, "bytes": file size}``."""
-    from mcap.records import Channel, Footer, Message, Schema
-
     schemas: dict[int, str] = {}
     channels: dict[int, dict] = {}
     complete = False

@@ -11,6 +11,8 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
+from mcap.writer import Writer
+
 from usvdrake.logs.mission_log.codecs import (
     _json,
     _ns,
@@ -44,8 +46,6 @@ class MissionLogWriter:
     footer; until then the file is readable by :func:`read_mission_log` as far as it got."""
 
     def __init__(self, path: str | Path, flush_period: float = 0.5, profile: str = "usvdrake"):
-        from mcap.writer import Writer
-
         self.path = Path(path)
         self.flush_period = float(flush_period)
         self._file = open(self.path, "wb")  # noqa: SIM115 - closed by close()

@@ -7,6 +7,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from usvdrake.systems.control.nmpc_problem import NmpcConfig, NmpcProblem
+from usvdrake.systems.guidance.reference_trajectory import HoldPose
 from usvdrake.vessel import VesselParams
 
 
@@ -73,8 +74,6 @@ class Nmpc(LeafSystem):
         self._dist = self.DeclareVectorInputPort("disturbance_estimate", 3)
         self._ref_port = None
         if reference is None:
-            from usvdrake.systems.guidance.reference_trajectory import HoldPose
-
             self._ref_port = self.DeclareAbstractInputPort(
                 "reference_trajectory", AbstractValue.Make(HoldPose([0.0, 0.0], 0.0))
             )

@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from matplotlib.figure import Figure
 from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue
 from pydrake.solvers import CommonSolverOption, MathematicalProgram, SnoptSolver, SolverOptions
 
@@ -281,16 +282,12 @@ def plot_fit(
     title: str = "",
 ) -> Path:
     """Measured vs simulated u, v, r of one trial with ξ̂ and with ξ0, plus the recorded τ."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     n = int(data.mask[trial].sum()) + 1
     t = data.t[trial, :n]
     fitted, _ = simulate_velocities(result.xi.as_vector(), data, False, substeps)
     start, _ = simulate_velocities(result.xi_initial.as_vector(), data, False, substeps)
-    fig, axes = plt.subplots(4, 1, figsize=(11, 9.5), sharex=True, constrained_layout=True)
+    fig = Figure(figsize=(11, 9.5), layout="constrained")
+    axes = fig.subplots(4, 1, sharex=True)
     for j, ax in enumerate(axes[:3]):
         ax.plot(t, data.nu[trial, :n, j], ".", ms=2.5, color="0.55", label="measured")
         ax.plot(t, start[trial, :n, j], "--", lw=1.2, color="tab:orange", label="initial ξ0")
@@ -326,5 +323,4 @@ def plot_fit(
     )
     path = Path(path)
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     return path

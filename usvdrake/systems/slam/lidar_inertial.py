@@ -42,7 +42,12 @@ from usvdrake.systems.slam.factor_graph3d import (
     KeyframeSelector,
 )
 from usvdrake.systems.slam.lidar_features import FeatureParams, LidarFeatures, extract_features
-from usvdrake.systems.slam.scan_registration3d import so3_exp, transform_points, voxel_downsample
+from usvdrake.systems.slam.scan_registration3d import (
+    deskew,
+    so3_exp,
+    transform_points,
+    voxel_downsample,
+)
 
 
 @dataclass
@@ -168,24 +173,6 @@ class ImuPropagator:
     def v_body(self) -> np.ndarray:
         """Velocity in the body frame [m/s]."""
         return self.T[:3, :3].T @ self.v
-
-
-def deskew(points: np.ndarray, age: np.ndarray, omega: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Points measured ``age`` [s] before the sweep's end, each in the sensor frame of its own
-    firing time, expressed in the sensor frame at the end; constant body twist (ω [rad/s],
-    v [m/s], sensor frame). With T(t) = T_end Exp((t − t_end) ξ) the point moves by
-    T_end⁻¹ T(t_i) = Exp(−age_i ξ): p_end = Exp(−age_i ω) p_i − age_i v (first order in the
-    translation; over a 0.1 s sweep the neglected term is ≤ ½ |ω| |v| age² ≈ 0.1 mm)."""
-    pts = np.asarray(points, dtype=float)
-    age = np.asarray(age, dtype=float)
-    th = -age[:, None] * np.asarray(omega, dtype=float)[None, :]  # rotation vector per point
-    n = np.linalg.norm(th, axis=1, keepdims=True)
-    small = n < 1e-12
-    k = np.where(small, 0.0, th / np.where(small, 1.0, n))
-    c, s = np.cos(n), np.sin(n)
-    kxp = np.cross(k, pts)
-    rotated = pts * c + kxp * s + k * np.sum(k * pts, axis=1, keepdims=True) * (1.0 - c)
-    return rotated - age[:, None] * np.asarray(v, dtype=float)[None, :]
 
 
 @dataclass

@@ -23,6 +23,7 @@ import threading
 import time
 from dataclasses import dataclass
 
+import gtsam
 import numpy as np
 
 from usvdrake.systems.slam.robust_kernel import gtsam_barron
@@ -69,8 +70,6 @@ class PoseGraphSolution:
 def solve_pose_graph(problem: PoseGraphProblem) -> PoseGraphSolution:
     """Solve ``problem`` (see :class:`PoseGraphProblem`): LM, or GNC-TLS over its loop
     candidates with every other factor a known inlier."""
-    import gtsam
-
     t0 = time.perf_counter()
     p = problem
     graph = gtsam.NonlinearFactorGraph()

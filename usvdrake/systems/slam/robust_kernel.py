@@ -25,6 +25,7 @@ and w has units 1/c².
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import gtsam
 import numpy as np
 
 # |α − 2| below this is treated as α = 2 exactly: the closed form's error there is
@@ -129,8 +130,6 @@ def gtsam_barron(alpha: float, c: float = 1.0):
 
     Use: ``gtsam.noiseModel.Robust.Create(gtsam_barron(0.0, 1.0), base_noise)``.
     """
-    import gtsam
-
     alpha, c = _check(alpha, c)
     c2 = c * c
 

@@ -37,6 +37,9 @@ smallest eigenvalue is reported.
 
 Coarse to fine: ``max_correspondence_distances`` lists the association radius of each stage
 (largest first); each stage iterates to convergence before the next, tighter one starts.
+
+The rigid-motion helpers here (:func:`so3_exp`, :func:`transform_points`, :func:`deskew`) are
+shared with the lidar-inertial front end and the 2D graph SLAM's scan de-skewing.
 """
 
 from collections.abc import Sequence
@@ -153,6 +156,24 @@ def so3_exp(w: np.ndarray) -> np.ndarray:
     if th < 1e-8:
         return np.eye(3) + K + 0.5 * K @ K
     return np.eye(3) + np.sin(th) / th * K + (1 - np.cos(th)) / th**2 * K @ K
+
+
+def deskew(points: np.ndarray, age: np.ndarray, omega: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Points measured ``age`` [s] before the sweep's end, each in the sensor frame of its own
+    firing time, expressed in the sensor frame at the end; constant body twist (ω [rad/s],
+    v [m/s], sensor frame). With T(t) = T_end Exp((t − t_end) ξ) the point moves by
+    T_end⁻¹ T(t_i) = Exp(−age_i ξ): p_end = Exp(−age_i ω) p_i − age_i v (first order in the
+    translation; over a 0.1 s sweep the neglected term is ≤ ½ |ω| |v| age² ≈ 0.1 mm)."""
+    pts = np.asarray(points, dtype=float)
+    age = np.asarray(age, dtype=float)
+    th = -age[:, None] * np.asarray(omega, dtype=float)[None, :]  # rotation vector per point
+    n = np.linalg.norm(th, axis=1, keepdims=True)
+    small = n < 1e-12
+    k = np.where(small, 0.0, th / np.where(small, 1.0, n))
+    c, s = np.cos(n), np.sin(n)
+    kxp = np.cross(k, pts)
+    rotated = pts * c + kxp * s + k * np.sum(k * pts, axis=1, keepdims=True) * (1.0 - c)
+    return rotated - age[:, None] * np.asarray(v, dtype=float)[None, :]
 
 
 def retract(T: np.ndarray, xi: np.ndarray) -> np.ndarray:

@@ -7,6 +7,8 @@ constant twist).
 
 import numpy as np
 
+from usvdrake.systems.slam.scan_registration3d import deskew
+
 
 def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """a ⊕ b for planar poses (x, y, θ)."""
@@ -18,9 +20,7 @@ def deskew_scan(points: np.ndarray, age: np.ndarray, twist: np.ndarray) -> np.nd
     """2D points (n × 2) [m], each measured ``age`` [s] before the scan's time in the sensor
     frame of its firing instant, expressed in the frame at the scan's time, the sensor moving
     with the constant twist (v_x, v_y [m/s], ω [rad/s]) of its own frame: the planar case of
-    :func:`usvdrake.systems.slam.lidar_inertial.deskew`."""
-    from usvdrake.systems.slam.lidar_inertial import deskew
-
+    :func:`usvdrake.systems.slam.scan_registration3d.deskew`."""
     vx, vy, w = np.asarray(twist, float)
     p3 = np.column_stack([points, np.zeros(len(points))])
     return deskew(p3, age, np.array([0.0, 0.0, w]), np.array([vx, vy, 0.0]))[:, :2]

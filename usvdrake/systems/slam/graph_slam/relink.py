@@ -6,6 +6,7 @@ adds the matches that pass its checks as loops and optimises the whole graph onc
 import time
 
 import numpy as np
+from tqdm import tqdm
 
 from usvdrake.systems.slam.graph_slam.graph import Constraint
 from usvdrake.systems.slam.graph_slam.poses import between
@@ -49,8 +50,6 @@ class RelinkMixin:
         last = self.nodes[-1]
         order = sorted(pairs)
         if progress:
-            from tqdm import tqdm
-
             order = tqdm(order, unit="node", desc="relink")
         for i in order:
             a = self.nodes[i]
