@@ -50,6 +50,15 @@ def run(args) -> int:
         f"  {s['completed']} completed, {s['failed']} failed; success (mission complete, no "
         f"collision) {s['successes']}/{s['runs']} = {100 * s['success_rate']:.1f} %"
     )
+    outcomes = s.get("outcomes", {})
+    misses = [f"{n} {k}" for k, n in outcomes.items() if k != "success" and n]
+    if misses:
+        print("  not successful: " + ", ".join(misses))
+        if outcomes.get("timed out") and args.duration is not None:
+            print(
+                f"  (--duration {args.duration:g} s ended those missions before they completed; "
+                f"the scenario's own is {scenario.duration:g} s)"
+            )
     for key in list(s["metrics"])[:6]:
         st = s["metrics"][key]
         print(f"  {key:<28} median {st['median']:.4g}  p5 {st['p5']:.4g}  p95 {st['p95']:.4g}")

@@ -64,13 +64,13 @@ import dask
 import numpy as np
 from dask.distributed import Client, LocalCluster, as_completed
 from matplotlib.figure import Figure
-from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
+from pydrake.common.yaml import yaml_load_typed
 from tqdm import tqdm
 
 from usvdrake.diagrams import check_scenario, with_overrides
 from usvdrake.jsonable import jsonable
 from usvdrake.run.mission import run_mission
-from usvdrake.scenario import Scenario
+from usvdrake.scenario import Scenario, scenario_yaml
 from usvdrake.typed_yaml import ConfigError
 from usvdrake.vessel import load_vessel
 from usvdrake.viz.report import png_base64
@@ -206,11 +206,6 @@ def draw_summary(base: Scenario, s: Scenario) -> dict:
         "heading_offset_deg": math.degrees(s.initial_state[2] - base.initial_state[2]),
         "model_error": [float(a / b) for a, b in zip(s.model_error, base.model_error, strict=True)],
     }
-
-
-def scenario_yaml(s: Scenario) -> str:
-    """The complete YAML of ``s`` (floats in shortest round-trip form: it reloads exactly)."""
-    return yaml_dump_typed(s)
 
 
 def scenario_from_yaml(text: str, file: str = "scenario") -> Scenario:
@@ -402,6 +397,22 @@ def run_campaign(
     return campaign
 
 
+OUTCOMES = ("success", "timed out", "collided", "failed")
+
+
+def outcome(row: dict) -> str:
+    """Why a run did or did not succeed: ``success``, ``failed`` (an error), ``collided`` or
+    ``timed out`` (the duration ended before the mission completed)."""
+    if row.get("status") != "completed":
+        return "failed"
+    m = row.get("metrics") or {}
+    if m.get("collision_samples", 0):
+        return "collided"
+    if not m.get("mission_complete"):
+        return "timed out"
+    return "success"
+
+
 def is_success(row: dict) -> bool:
     m = row.get("metrics") or {}
     return (
@@ -453,6 +464,7 @@ def summarise(rows: list[dict]) -> dict:
         "failed": sum(r["status"] == "failed" for r in rows),
         "successes": successes,
         "success_rate": successes / len(rows) if rows else 0.0,
+        "outcomes": {k: sum(outcome(r) == k for r in rows) for k in OUTCOMES},
         "fractions_true": {k: float(np.mean(v)) for k, v in flags.items()},
         "metrics": stats,
     }
