@@ -1,14 +1,14 @@
-"""Benchmark: the weighted multi-connection A* of 003 §Path Planner (numba kernel).
+"""Benchmark: the weighted multi-connection A* of Ueland 2017 §Path Planner (numba kernel).
 
 A 400 × 400 grid at 0.2 m (an 80 m square) with random rectangular obstacles (fixed seed),
-inflated by 0.4 m (003 §Map Processing) and weighted by 003 eq. (1),
+inflated by 0.4 m (Ueland 2017 §Map Processing) and weighted by Ueland 2017 eq. (1),
 w = 1 + 5 / (0.1 + d_obj) with d_obj [m] the distance transform to the obstacles; a start and
 goal ~75 m apart (Nav2's Smac 2D A* took 243 ms for a ~75 m path). Reported:
 
 * ``astar_ms_median`` / ``astar_ms_p95``: :func:`weighted_astar` with connection distance 4
-  (48 headings, as 003 flies), after one warm-up call (numba compilation), ≥ 20 timed runs;
+  (48 headings, as Ueland 2017 flies), after one warm-up call (numba compilation), ≥ 20 timed runs;
   target ≤ 50 ms median. ``expanded``, ``path_length_m``, ``path_cost_m`` of that plan.
-* the same for connection distance 1 (8 headings), and ``length_ratio_d4_d1`` (003 Fig. 8:
+* the same for connection distance 1 (8 headings), and ``length_ratio_d4_d1`` (Ueland 2017 Fig. 8:
   the d = 4 path is shorter).
 * ``preprocess_ms_median``: the explorer's map processing (``process_map``: inflation,
   reachability, eq. 1 weights).
@@ -28,7 +28,7 @@ from usvdrake.systems.guidance.weighted_astar import path_length, weighted_astar
 from usvdrake.worlds.world import OccupancyGrid
 
 SIZE, RESOLUTION = 400, 0.2  # cells, [m]
-INFLATION = 0.4  # [m] 003 §Map Processing
+INFLATION = 0.4  # [m] Ueland 2017 §Map Processing
 START_XY, GOAL_XY = (5.0, 20.0), (75.0, 47.0)  # [m], 75.0 m apart
 TARGET_MS = 50.0
 
@@ -54,7 +54,7 @@ def make_map(seed: int = 0) -> np.ndarray:
 
 
 def preprocess(occ: np.ndarray):
-    """The explorer's own map processing (inflation, reachability, 003 eq. 1 weights) on the
+    """The explorer's own map processing (inflation, reachability, Ueland 2017 eq. 1 weights) on the
     map as an occupancy grid: what each planning cycle does before its A*."""
     grid = OccupancyGrid((0.0, 0.0), RESOLUTION, np.where(occ, 100, 0).astype(np.int8))
     return process_map(grid, START_XY, INFLATION)

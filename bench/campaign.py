@@ -1,6 +1,6 @@
 """Benchmark: a Monte Carlo campaign (usvdrake.run.campaign) on 1 and on 2 Dask workers.
 
-The same campaign — river_tracking (000 §VI-B: NMPC + NMHE on the Charles River), 16
+The same campaign — river_tracking (Roboat II §VI-B: NMPC + NMHE on the Charles River), 16
 randomised runs of 60 simulated seconds, campaign seed 0 — once on a ``LocalCluster`` of one
 worker process and once on two (one thread and one BLAS thread each). Each wall time is the
 whole :func:`run_campaign` call as a user sees it: randomisation, cluster start, the workers'

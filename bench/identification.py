@@ -1,6 +1,6 @@
-"""Benchmark: grey-box identification of Roboat II's ξ by SQP (000 §IV-A eq. 9, §VI-B).
+"""Benchmark: grey-box identification of Roboat II's ξ by SQP (Roboat II §IV-A eq. 9, §VI-B).
 
-Simulates 000's experiment (5 trials of ~150 s of remote-controlled sinusoidal thrust, 10 Hz,
+Simulates Roboat II's experiment (5 trials of ~150 s of remote-controlled sinusoidal thrust, 10 Hz,
 noisy velocities and thrusts; ``--seed``), round-trips it through the log format, and fits
 ξ = [m11 m22 m33 Xu Yv Nr] with SNOPT from a start each component of which is 35-50 % off the
 truth. Prints one JSON object. Target: every component within 3 % of the truth.

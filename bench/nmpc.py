@@ -1,4 +1,4 @@
-"""Benchmark: the NMPC of 000 §IV-B — our real-time iteration on Drake's MathematicalProgram
+"""Benchmark: the NMPC of Roboat II §IV-B — our real-time iteration on Drake's MathematicalProgram
 against the same OCP solved by CasADi + IPOPT (a benchmark-only extra: ``pip install casadi``).
 
 Both controllers close the loop on the same simulated Roboat II (RK4 at 10 ms, no model error)

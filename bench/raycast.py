@@ -1,6 +1,6 @@
 """Benchmark: ray casting speed on the real code path (LidarModel.sweep → raycast.cast).
 
-* ``lidar2d_ms_median``: a 1081-beam Hokuyo UTM-30LX scan (60 m, as 002 simulates it) in
+* ``lidar2d_ms_median``: a 1081-beam Hokuyo UTM-30LX scan (60 m, as Pham et al. simulates it) in
   ``valley``, from 20 free-water poses 10-30 m off the shore. Target ≤ 1 ms.
 * ``lidar3d_ms_median``: a 16 × 1800 VLP-16 sweep (100 m) in ``amsterdam_canals``, from 20
   poses along the ring canals and the river. Target ≤ 15 ms.

@@ -1,4 +1,4 @@
-"""Benchmark: the 2D graph SLAM (002) with 5 % of its scans replaced by garbage (issue 6).
+"""Benchmark: the 2D graph SLAM (Pham et al.) with 5 % of its scans replaced by garbage (issue 6).
 
 Records ``--duration`` s of ``valley_survey`` (USV2000 + Hokuyo at 40 Hz around the valley lake)
 or takes an existing mission log (``--log``), then runs ``usvdrake slam2d``'s offline runner

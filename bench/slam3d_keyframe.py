@@ -1,4 +1,4 @@
-"""Benchmark: per-keyframe cost of 000 §V's lidar-IMU-GPS SLAM on the canal survey's sensors.
+"""Benchmark: per-keyframe cost of Roboat II §V's lidar-IMU-GPS SLAM on the canal survey's sensors.
 
 Records ``--duration`` s of the ``canal_survey`` scenario (VLP-16 at 10 Hz, IMU at 50 Hz, GPS at
 5 Hz, along Amsterdam's inner ring), or takes an existing mission log (``--log``), and replays
@@ -6,11 +6,11 @@ it offline through :class:`usvdrake.systems.slam.lidar_inertial.LidarInertialSla
 scenario's configuration (:func:`usvdrake.run.slam3d.run_slam3d`, the same order of messages as the
 live ``FactorGraphSlam``). Per keyframe: de-skew + feature extraction + scan-to-submap
 registration + iSAM2 update(s) with the GPS factor — the issue's definition; the loop search
-(000 §V-C, LIO-SAM's separate thread) is timed on its own (``loop_ms_*``) and with the rest
+(Roboat II §V-C, LIO-SAM's separate thread) is timed on its own (``loop_ms_*``) and with the rest
 (``keyframe_with_loop_ms_*``).
 
 Prints one JSON object: ``keyframe_ms_median`` / ``keyframe_ms_p95`` (targets 40 / 80 ms;
-000 §VI-A: 79.3 ms average on a NUC i7), ``features_ms_median``, the split of the median
+Roboat II §VI-A: 79.3 ms average on a NUC i7), ``features_ms_median``, the split of the median
 keyframe into registration / update / loop, keyframes, ``ate_m`` and ``realtime_factor`` of the
 replay. The replay only measures the SLAM (no simulation in the loop).
 """

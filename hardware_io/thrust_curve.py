@@ -16,7 +16,7 @@ against an independent summary of the same workbook (16 V: dead band 1472-1528 Â
 points, which is within about 0.1-0.2 kgf of the full 4 Âµs-step table; re-transcribe the full
 sheet if better accuracy is needed.
 
-Voltage: 16 V (4S Li-ion/LiPo nominal 14.8 V, fully charged 16.8 V). Roboat II (000, Table I)
+Voltage: 16 V (4S Li-ion/LiPo nominal 14.8 V, fully charged 16.8 V). Roboat II (Table I)
 runs at 14.8 V, where the T200 gives roughly 8 % less thrust (14 V sheet: about 4.5 kgf forward,
 3.5 kgf reverse); the 16 V curve is used as published, not rescaled.
 

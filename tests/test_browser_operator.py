@@ -1,4 +1,4 @@
-"""003 §Operator Interaction in a real browser: headless Chromium opens the live Meshcat of
+"""Ueland 2017 §Operator Interaction in a real browser: headless Chromium opens the live Meshcat of
 the exploring vessel, types a goal into the sliders, clicks "Go to goal", and the vessel heads
 there. Needs Debian's chromium (`.ci/run` installs it) and playwright (test extra)."""
 
@@ -66,7 +66,7 @@ def test_the_operator_sends_the_vessel_to_a_location_from_the_browser():
     assert command[0] == OperatorMode.GOTO
     np.testing.assert_allclose(command[1:], goal, atol=0.051)
     end = port.Eval(context)[:2]
-    # it headed there: most of the way covered in under a minute at 003's speeds
+    # it headed there: most of the way covered in under a minute at Ueland 2017's speeds
     assert np.linalg.norm(end - goal) < 0.35 * np.linalg.norm(start - goal)
     destination = diagram.GetOutputPort("destination").Eval(context)
     assert destination[2] == 1.0 and np.linalg.norm(destination[:2] - goal) < 0.5

@@ -1,4 +1,4 @@
-"""Map processing, frontiers and the velocity-setpoint law of 003, tested alone."""
+"""Map processing, frontiers and the velocity-setpoint law of Ueland 2017, tested alone."""
 
 import numpy as np
 import pytest

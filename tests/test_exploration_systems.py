@@ -1,4 +1,5 @@
-"""The exploration LeafSystems of 003 wired on a known map: explorer → planner → setpoint law,
+"""The exploration LeafSystems of Ueland 2017 wired on a known map: explorer → planner → setpoint
+law,
 the operator's modes, and the scenario's checks."""
 
 import dataclasses
@@ -86,7 +87,7 @@ def test_explore_plans_to_the_cheapest_frontier_and_sets_the_setpoint_ahead():
     end = pmap.to_cell(path[-1])
     assert any((goals == end).all(axis=1)) and dest[2] == 1.0
     np.testing.assert_allclose(dest[:2], path[-1])
-    # 003 eqs. 2-4: the setpoint is r_s(d_min = 2 m) = 2.8 m along the path from the vessel
+    # Ueland 2017 eqs. 2-4: the setpoint is r_s(d_min = 2 m) = 2.8 m along the path from the vessel
     setpoint = outputs(sim, (law, "setpoint"))[0]
     travelled = np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))
     k = np.searchsorted(travelled, lookahead_distance(2.0))

@@ -1,9 +1,10 @@
-"""Factor-graph back end of 000 §V (factor_graph3d) on a synthetic canal loop.
+"""Factor-graph back end of Roboat II §V (factor_graph3d) on a synthetic canal loop.
 
 The scene: a closed rectangular canal around an island (centreline 40 m × 20 m, 8 m wide),
 quay walls and pillars, and a bridge near the start. Water gives no lidar returns, so away from
 the bridge the height z is unobservable to the lidar (registration degenerate in z) — the
-vertical drift 000 §VI-A reports; the bridge underside makes z observable at the start, which is
+vertical drift Roboat II §VI-A reports; the bridge underside makes z observable at the start, which
+is
 where the loop closes. A VLP-16 (16 rings, 900 columns) is ray-cast analytically.
 """
 
@@ -141,7 +142,7 @@ def drive(canal, config, n=None, seed=2):
 
 @pytest.fixture(scope="module")
 def ablation(canal):
-    """000 §VI-A ablation: lidar only; lidar + GPS; lidar + loop (GPS-denied)."""
+    """Roboat II §VI-A ablation: lidar only; lidar + GPS; lidar + loop (GPS-denied)."""
     cfg = FactorGraph3DConfig
     return {
         "lidar": drive(canal, cfg(use_gps=False, use_loop_closure=False)),
@@ -150,7 +151,8 @@ def ablation(canal):
     }
 
 
-# --- keyframe selection (000 §V-A) ---------------------------------------------------------------
+# --- keyframe selection (Roboat II §V-A)
+# ---------------------------------------------------------------
 
 
 def test_keyframe_selection_exact_thresholds():

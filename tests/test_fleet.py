@@ -1,4 +1,5 @@
-"""The fleet (000 §III): assignment by path cost, the request ledger, seeing and avoiding other
+"""The fleet (Roboat II §III): assignment by path cost, the request ledger, seeing and avoiding
+other
 boats, the coordinator and the fleet diagram."""
 
 import dataclasses

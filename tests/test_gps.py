@@ -103,7 +103,7 @@ def test_altitude_bias_statistics():
 
 
 def test_default_altitude_error_reaches_tens_of_metres_over_three_hours():
-    """000 §VI-A: "altitude errors approximating 100 m" over a 3-hour run."""
+    """Roboat II §VI-A: "altitude errors approximating 100 m" over a 3-hour run."""
     cfg = dataclasses.replace(GpsConfig(), rate_hz=1.0)
     peaks = []
     for seed in range(4):

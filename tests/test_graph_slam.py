@@ -1,4 +1,5 @@
-"""Sliding-window graph SLAM (002): tracking, loop closure, Context copies, the LeafSystem."""
+"""Sliding-window graph SLAM (Pham et al.): tracking, loop closure, Context copies, the
+LeafSystem."""
 
 import copy
 from dataclasses import replace

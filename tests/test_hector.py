@@ -1,4 +1,5 @@
-"""Hector SLAM (Kohlbrecher et al. 2011; 003) in the NTNU basin with synthetic RPLIDAR scans:
+"""Hector SLAM (Kohlbrecher et al. 2011; Ueland 2017) in the NTNU basin with synthetic RPLIDAR
+scans:
 map interpolation against finite differences, the matcher against a known offset, and the
 whole SLAM loop against the true path, noise-free and with the RPLIDAR's 1 % range noise."""
 
@@ -11,7 +12,7 @@ from usvdrake.systems.slam.hector import HectorMapper, interpolate_map
 from usvdrake.worlds import make_world
 
 RES = 0.05  # [m] finest map cell
-RATE = 5.5  # [Hz] RPLIDAR A1 scan rate (003)
+RATE = 5.5  # [Hz] RPLIDAR A1 scan rate (Ueland 2017)
 MAX_RANGE = 12.0  # [m] RPLIDAR A1
 # The basin's walls lie on multiples of 0.05 m. With an origin on that lattice they would run
 # along cell boundaries, where the map's cell-centred values put them half a cell off (a bias

@@ -1,4 +1,4 @@
-"""Grey-box identification (000 eq. 9): recovery, exact gradients, bounds, log format, CLI."""
+"""Grey-box identification (Roboat II eq. 9): recovery, exact gradients, bounds, log format, CLI."""
 
 import json
 

@@ -1,4 +1,4 @@
-"""The lidar-IMU front end of the 3D SLAM (000 §V): IMU propagation, gravity compensation,
+"""The lidar-IMU front end of the 3D SLAM (Roboat II §V): IMU propagation, gravity compensation,
 de-skewing, sun glare, and the ``FactorGraphSlam`` system on the canal survey."""
 
 import numpy as np
@@ -150,7 +150,7 @@ def test_slam_outputs_are_logged(short_survey):
 
 
 def test_controllers_fly_on_the_slam_estimate(short_survey):
-    """canal_survey's estimator is the SLAM (000 §V): the logged state estimate is its pose,
+    """canal_survey's estimator is the SLAM (Roboat II §V): the logged state estimate is its pose,
     not ground truth, and the boat still follows the canal."""
     from usvdrake.logs.mission_log import read_log_vectors
 

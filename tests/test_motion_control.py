@@ -1,4 +1,5 @@
-"""003's motion controller: third-order reference model, passive observer, PD, with the plant."""
+"""Ueland 2017's motion controller: third-order reference model, passive observer, PD, with the
+plant."""
 
 import numpy as np
 import pytest
@@ -263,7 +264,8 @@ def closed_loop(pose0, setpoint, tau_env=(0.0, 0.0, 0.0), with_bias=True):
 
 def test_pd_observer_allocation_reach_a_setpoint_3m_away():
     """The full loop (reference model, observer fed the plant's exact pose and the allocated
-    force, PD, allocation, mixer) moves the vessel 3 m and holds its heading (003: heading is
+    force, PD, allocation, mixer) moves the vessel 3 m and holds its heading (Ueland 2017: heading
+    is
     not planned), with an unknown environmental force and yaw moment switched on at t = 0: on
     its own, the allocation makes no yaw moment on the round hull, so without it the heading
     assertion could not fail. Without the bias estimate the yaw moment alone would leave

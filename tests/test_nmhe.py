@@ -1,4 +1,4 @@
-"""NMHE of 000 §IV-C (eqs. 15-17) and the pose sensor that feeds it.
+"""NMHE of Roboat II §IV-C (eqs. 15-17) and the pose sensor that feeds it.
 
 The core is checked on trajectories of the discrete model itself (``rollout``, Roboat II) with
 measurements drawn at the RT standard deviations of eq. (16): velocity accuracy against finite
@@ -34,7 +34,7 @@ from usvdrake.vessel import load_vessel
 
 ROBOAT = load_vessel("roboat2")
 XI = ROBOAT.hydrodynamics
-DT = 0.1  # [s] 000: 10 Hz
+DT = 0.1  # [s] Roboat II: 10 Hz
 POSE_STD = np.sqrt([0.0005, 0.0005, 0.0005, 0.0001])  # [m, m, rad, rad/s] RT⁻¹ of eq. (16)
 FORCE_STD = 1.0  # [N] RT⁻¹ of eq. (16), per thruster
 WARM_UP = 30  # samples before the errors are scored (window of 20 full, transient gone)

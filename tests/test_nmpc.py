@@ -1,4 +1,5 @@
-"""NMPC (000 eqs. 10-14): RTI agrees with the converged NLP and with IPOPT; failure handling."""
+"""NMPC (Roboat II eqs. 10-14): RTI agrees with the converged NLP and with IPOPT; failure
+handling."""
 
 import numpy as np
 import pytest

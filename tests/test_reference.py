@@ -1,4 +1,4 @@
-"""Grid A* (Hart, Nilsson & Raphael 1968) and the timed NMPC reference of 000 §VI-B."""
+"""Grid A* (Hart, Nilsson & Raphael 1968) and the timed NMPC reference of Roboat II §VI-B."""
 
 import math
 
@@ -239,7 +239,7 @@ def test_reference_speed_heading_and_yaw_rate(reference):
     t = np.arange(ref.t0, ref.t_end, 0.01)
     q, nu_dot = ref.sample(t)
     middle = (t > ref.t0 + 20.0) & (t < ref.t_end - 20.0)
-    assert np.all(np.abs(q[middle, 3] - 0.6) < 1e-9)  # cruise at u = 0.6 m/s (000 §VI-B)
+    assert np.all(np.abs(q[middle, 3] - 0.6) < 1e-9)  # cruise at u = 0.6 m/s (Roboat II §VI-B)
     assert np.all(q[:, 4] == 0.0) and np.all(nu_dot[:, 1] == 0.0)  # v = 0
     assert np.abs(q[:, 5]).max() <= 0.3  # Roboat II's yaw rate at 0.6 m/s
     assert np.abs(np.diff(q[:, 2])).max() <= 0.3 * 0.01 + 1e-9  # ψ continuous, no wrap jumps

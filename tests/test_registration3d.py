@@ -1,4 +1,5 @@
-"""LOAM features (lidar_features) and scan-to-map registration (scan_registration3d), 000 §V-A."""
+"""LOAM features (lidar_features) and scan-to-map registration (scan_registration3d), Roboat II
+§V-A."""
 
 from pathlib import Path
 

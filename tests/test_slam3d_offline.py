@@ -1,4 +1,5 @@
-"""Offline 3D SLAM (000 §V) on a recorded mission log, and 000 §VI-A's ablation on it."""
+"""Offline 3D SLAM (Roboat II §V) on a recorded mission log, and Roboat II §VI-A's ablation on
+it."""
 
 import copy
 import json

@@ -149,7 +149,7 @@ def test_least_effort_among_exact_solutions(name):
 
 
 def test_roboat2_configuration_matrix_is_eq3_mirrored():
-    """000 eq. (3) in the y-left frame with a = 0.6 m, b = 1.4 m (see roboat2.yaml)."""
+    """Roboat II eq. (3) in the y-left frame with a = 0.6 m, b = 1.4 m (see roboat2.yaml)."""
     b = configuration_matrix(load_vessel("roboat2").thrusters)
     expected = np.array([[1, 1, 0, 0], [0, 0, 1, 1], [-0.3, 0.3, 0.7, -0.7]])
     np.testing.assert_allclose(b, expected, atol=1e-12)

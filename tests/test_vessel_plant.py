@@ -1,4 +1,5 @@
-"""VesselPlant against an independent integration of 000 eqs. (1)-(6), and its linearisation."""
+"""VesselPlant against an independent integration of Roboat II eqs. (1)-(6), and its
+linearisation."""
 
 import numpy as np
 import pytest

@@ -1,6 +1,8 @@
-"""The weighted multi-goal A* of 003 §Path Planner (usvdrake.systems.guidance.weighted_astar):
+"""The weighted multi-goal A* of Ueland 2017 §Path Planner
+(usvdrake.systems.guidance.weighted_astar):
 neighbour offsets, the edge model against shapely, optimality against scipy's Dijkstra on the
-explicit graph, the 8-connected special case against grid_astar, and 003 Fig. 8 on a real map.
+explicit graph, the 8-connected special case against grid_astar, and Ueland 2017 Fig. 8 on a real
+map.
 """
 
 from math import gcd
@@ -233,7 +235,8 @@ def test_errors():
         weighted_astar(trav, np.ones((4, 4)), (0, 0), (3, 3))
 
 
-# --- 003 Fig. 8 on the NTNU basin -----------------------------------------------------------
+# --- Ueland 2017 Fig. 8 on the NTNU basin
+# -----------------------------------------------------------
 
 
 def test_connection_distance_four_shortens_paths_in_ntnu_basin():
@@ -242,8 +245,8 @@ def test_connection_distance_four_shortens_paths_in_ntnu_basin():
     g = make_world("ntnu_basin", 0).occupancy(0.1)
     res = g.resolution
     clearance = ndimage.distance_transform_edt(g.data != 100) * res
-    trav = clearance > 0.4  # 003 §Map Processing: 0.4 m inflation
-    w = 1.0 + 5.0 / (0.1 + clearance)  # 003 eq. (1)
+    trav = clearance > 0.4  # Ueland 2017 §Map Processing: 0.4 m inflation
+    w = 1.0 + 5.0 / (0.1 + clearance)  # Ueland 2017 eq. (1)
 
     def cell(x, y):
         r, c = int((y - g.origin[1]) / res), int((x - g.origin[0]) / res)

@@ -91,7 +91,7 @@ def test_unknown_world_is_one_clear_line():
 
 
 def test_round_hull_clearance_is_the_same_at_every_heading():
-    """003's round vessel: the clearance is the distance to the circle of its top diameter,
+    """Ueland 2017's round vessel: the clearance is the distance to the circle of its top diameter,
     not to the square around it (whose corners stick out 0.11 m further)."""
     from usvdrake.worlds.solids import box
     from usvdrake.worlds.world import World, hull_clearance

@@ -1,4 +1,5 @@
-"""The NTNU basin (003) and the natural lakes (002): determinism, sizes, closed shores, the
+"""The NTNU basin (Ueland 2017) and the natural lakes (Pham et al.): determinism, sizes, closed
+shores, the
 basin's connectivity for the planner's inflated vessel, the sloped wave-generator face, valid
 solids, and the ray-casting budget of a Hokuyo scan in the valley."""
 
@@ -15,9 +16,9 @@ from usvdrake.worlds.raycast import ColumnLayout, _pairs, cast
 GENERATORS = [ntnu_basin, valley, phu_tho_lake]
 KINDS = {"wall", "bank", "rock", "tree", "bush", "leaf", "boat", "plank", "mount"}
 MIDDLE = {"ntnu_basin": START, "valley": (0.0, 0.0), "phu_tho_lake": (0.0, 0.0)}
-HOKUYO = ColumnLayout(az0=-3 * np.pi / 4, daz=np.deg2rad(0.25), count=1081)  # 002 §V-B/C
-VESSEL_RADIUS = 0.3  # [m] 003's round vessel is 0.548 m across, rounded up
-INFLATION = 0.4  # [m] 003, Map Processing
+HOKUYO = ColumnLayout(az0=-3 * np.pi / 4, daz=np.deg2rad(0.25), count=1081)  # Pham et al. §V-B/C
+VESSEL_RADIUS = 0.3  # [m] Ueland 2017's round vessel is 0.548 m across, rounded up
+INFLATION = 0.4  # [m] Ueland 2017, Map Processing
 
 
 @pytest.fixture(scope="module", params=GENERATORS, ids=lambda f: f.__name__)
@@ -94,7 +95,8 @@ def test_basin_size_and_datum():
 
 @pytest.mark.parametrize("seed", range(4))
 def test_basin_connected_for_the_inflated_vessel(seed):
-    """003's planner: the free water eroded by the vessel's radius plus the 0.4 m inflation is
+    """Ueland 2017's planner: the free water eroded by the vessel's radius plus the 0.4 m inflation
+    is
     one region holding the start and ≥ 95 % of the eroded free cells (the labyrinth, behind
     the narrow passage, is ~30 %, so a closed passage fails this)."""
     w = ntnu_basin(seed)

@@ -74,7 +74,7 @@ class SimulationConfig:
 @dataclass
 class SensorsConfig:
     # Which sensors the station carries (exports as ports): any of lidar2d, lidar3d, imu, gps,
-    # pose (a noisy [x y ψ r] at 10 Hz standing in for 000's SLAM pose + gyro, for the NMHE).
+    # pose (a noisy [x y ψ r] at 10 Hz standing in for Roboat II's SLAM pose + gyro, for the NMHE).
     # thrust_measured and ground_truth_state are always there.
     enabled: list[str] = field(default_factory=list)
     lidar2d: LidarConfig = field(default_factory=lambda: LidarConfig(preset="rplidar_a1"))
@@ -89,11 +89,12 @@ class SensorsConfig:
 
 @dataclass
 class SlamConfig:
-    # "none"; "graph": 002's sliding-window graph SLAM; "hector": 003's Hector-style SLAM; both
+    # "none"; "graph": Pham et al.'s sliding-window graph SLAM; "hector": Ueland 2017's Hector-style
+    # SLAM; both
     # on lidar_scan (needs lidar2d). "known_poses": the exploration's ground-truth map source —
     # the same scans inserted at the true pose (grid extent and resolution from ``hector``).
     # The SLAM runs in the autonomy half as an observer; metrics score it against ground truth.
-    # "factor_graph": 000's lidar-IMU-GPS factor graph on iSAM2 (needs lidar3d, imu and gps).
+    # "factor_graph": Roboat II's lidar-IMU-GPS factor graph on iSAM2 (needs lidar3d, imu and gps).
     method: str = "none"
     graph: GraphSlamConfig = field(default_factory=GraphSlamConfig)
     hector: HectorConfig = field(default_factory=HectorConfig)
@@ -102,7 +103,7 @@ class SlamConfig:
 
 @dataclass
 class ObserverSettings:
-    """003's nonlinear passive observer (Fossen 2011 §11.4.1) on the SLAM pose in calm water
+    """Ueland 2017's nonlinear passive observer (Fossen 2011 §11.4.1) on the SLAM pose in calm water
     (no wave filter); the gains follow from the cut-offs by
     :func:`usvdrake.systems.estimation.observer_dynamics.fossen_gains`."""
 
@@ -113,7 +114,8 @@ class ObserverSettings:
 
 @dataclass
 class ExplorationConfig:
-    """003's autonomous exploration: frontier explorer + weighted A* + velocity-setpoint law +
+    """Ueland 2017's autonomous exploration: frontier explorer + weighted A* + velocity-setpoint law
+    +
     reference model + PD controller + thrust allocation (controller ``explore``)."""
 
     explorer: ExplorerConfig = field(default_factory=ExplorerConfig)
@@ -123,7 +125,7 @@ class ExplorationConfig:
     )
     pd: PdControllerConfig = field(default_factory=PdControllerConfig)
     observer: ObserverSettings = field(default_factory=ObserverSettings)
-    # Scripted operator actions (003 §Operator Interaction), e.g.
+    # Scripted operator actions (Ueland 2017 §Operator Interaction), e.g.
     # [{time: 120, mode: goto, goal: [10, 3]}, {time: 200, mode: explore}]
     commands: list[OperatorCommandConfig] = field(default_factory=list)
     operator_controls: bool = True  # Meshcat buttons and goal sliders when a Meshcat is live
@@ -149,7 +151,8 @@ class RequestConfig:
 
 @dataclass
 class FleetConfig:
-    """Roboat's ride service (000 §III): several boats, one coordinator (controller ``taxi``)."""
+    """Roboat's ride service (Roboat II §III): several boats, one coordinator (controller
+    ``taxi``)."""
 
     vessels: list[FleetVesselConfig] = field(default_factory=list)
     requests: list[RequestConfig] = field(default_factory=list)
@@ -164,7 +167,9 @@ class SerialDeviceConfig:
 
     port: str = ""  # device path, e.g. /dev/serial/by-id/usb-u-blox_GNSS-if00
     baudrate: int = 115200  # [bit/s]
-    protocol: str = ""  # lidar2d only: 'rplidar' (Slamtec A1, 003) or 'scip' (Hokuyo, 002)
+    protocol: str = (
+        ""  # lidar2d only: 'rplidar' (Slamtec A1, Ueland 2017) or 'scip' (Hokuyo, Pham et al.)
+    )
 
 
 @dataclass
@@ -203,16 +208,17 @@ class Scenario:
     # Multiplicative errors on the simulated plant's ξ = [m11 m22 m33 Xu Yv Nr] (the station
     # only; the autonomy's NMPC/NMHE/controllers keep the vessel file's nominal ξ)
     model_error: list[float] = field(default_factory=lambda: [1.0] * 6)
-    # "oracle": the autonomy reads ground truth; "nmhe": 000's NMHE on the pose sensor and the
+    # "oracle": the autonomy reads ground truth; "nmhe": Roboat II's NMHE on the pose sensor and the
     # measured thrust (needs "pose" in sensors.enabled); "slam": the controllers fly on the 3D
-    # SLAM's [x y ψ u v r] (000 §V; needs slam.method factor_graph)
+    # SLAM's [x y ψ u v r] (Roboat II §V; needs slam.method factor_graph)
     estimator: str = "oracle"
     nmhe: NmheConfig = field(default_factory=NmheConfig)
     # "baseline": LOS guidance + PD + thrust allocation over the waypoints; "nmpc": the NMPC of
-    # 000 tracking an A* reference through the waypoints (goals in sequence) at mission.speed
+    # Roboat II tracking an A* reference through the waypoints (goals in sequence) at mission.speed
     controller: str = "baseline"
     slam: SlamConfig = field(default_factory=SlamConfig)
-    # "explore" (003): the vessel maps the world by itself; needs slam.method hector or graph
+    # "explore" (Ueland 2017): the vessel maps the world by itself; needs slam.method hector or
+    # graph
     exploration: ExplorationConfig = field(default_factory=ExplorationConfig)
     nmpc: NmpcConfig = field(default_factory=NmpcConfig)
     sensors: SensorsConfig = field(default_factory=SensorsConfig)

@@ -17,7 +17,7 @@ VESSEL_DIR = Path(__file__).parent / "vessels"
 
 @dataclass
 class Hull:
-    shape: str = "box"  # "box" (rectangular hull) or "round" (cone-like, 003)
+    shape: str = "box"  # "box" (rectangular hull) or "round" (cone-like, Ueland 2017)
     length: float = 1.0  # [m] overall length (top diameter for round hulls)
     beam: float = 0.5  # [m] overall width (top diameter for round hulls)
     height: float = 0.3  # [m] keel to deck
@@ -27,7 +27,7 @@ class Hull:
 
 @dataclass
 class Hydrodynamics:
-    """ξ of 000 eq. (9): the diagonal inertia (rigid body + added mass) and linear drag."""
+    """ξ of Roboat II eq. (9): the diagonal inertia (rigid body + added mass) and linear drag."""
 
     m11: float = 1.0  # [kg] surge inertia incl. added mass
     m22: float = 1.0  # [kg] sway inertia incl. added mass

@@ -1,4 +1,4 @@
-"""Slamtec RPLIDAR A1 serial protocol (003's lidar, 115200 baud 8N1): pure codec, no I/O.
+"""Slamtec RPLIDAR A1 serial protocol (Ueland 2017's lidar, 115200 baud 8N1): pure codec, no I/O.
 
 Requests (host → device)::
 

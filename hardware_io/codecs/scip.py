@@ -1,4 +1,4 @@
-"""Hokuyo SCIP 2.0 (UTM-30LX, 002's lidar): pure codec, no I/O.
+"""Hokuyo SCIP 2.0 (UTM-30LX, Pham et al.'s lidar): pure codec, no I/O.
 
 Commands (host → sensor), ASCII terminated by LF, optional ``;string`` (≤ 16 characters) that
 the sensor echoes back::

@@ -1,4 +1,5 @@
-"""Host ⇄ thruster microcontroller protocol (STM32 in 000, Arduino in 003): pure codec, no I/O.
+"""Host ⇄ thruster microcontroller protocol (STM32 in Roboat II, Arduino in Ueland 2017): pure
+codec, no I/O.
 
 Frame (all multi-byte fields little-endian; full byte tables in ``hardware_io/PROTOCOL.md``)::
 

@@ -9,7 +9,7 @@ source speaks:
   curve as the simulated station's ``thruster_command``, and sends telemetry back.
 * :class:`GpsEmulator` — an NMEA 0183 receiver sending GGA: the simulated station's ``gps``
   fix when the scenario simulates a GPS, else an RTK-class fix made from the true position with
-  the pose sensor's σ (000 eq. 16: RT = 0.0005 m² → σ ≈ 2.2 cm), fix quality 4.
+  the pose sensor's σ (Roboat II eq. 16: RT = 0.0005 m² → σ ≈ 2.2 cm), fix quality 4.
 * :class:`RplidarEmulator` — a Slamtec RPLIDAR A1 sending the simulated 2D scans.
 * :class:`ImuEmulator` — an Xsens MTi sending MTData2 (quaternion, acceleration, rate of
   turn): the simulated ``imu`` when simulated, else an AHRS from the true heading and yaw rate
@@ -145,7 +145,8 @@ class ImuEmulator(LeafSystem):
 
     Inputs: ``state`` and, with ``simulated_imu``, ``imu`` (the simulated station's
     :class:`ImuSample`, sent as it is). Without it: orientation = yaw ψ + N(0, σψ²), rate of
-    turn z = r + N(0, σr²), specific force = gravity only (an AHRS heading with 000 eq. 16's σ;
+    turn z = r + N(0, σr²), specific force = gravity only (an AHRS heading with Roboat II eq. 16's
+    σ;
     the NMHE reads only ψ and r).
     """
 

@@ -1,6 +1,6 @@
 """``McuFirmware``: a pure-Python model of the thruster microcontroller's firmware.
 
-What the STM32 (Roboat II, 000) / Arduino (NTNU round vessel, 003) does with the protocol of
+What the STM32 (Roboat II) / Arduino (NTNU round vessel, Ueland 2017) does with the protocol of
 ``hardware_io/PROTOCOL.md`` (codec: :mod:`hardware_io.codecs.thrust`), without Drake and without
 I/O, so a device emulator (a :class:`~hardware_io.emulators.pty_link.PtyDevice` loop) and tests
 can stand in

@@ -1,7 +1,7 @@
 """``GnssImuPose``: the hardware station's ``pose_measurement`` from an RTK GNSS and an AHRS.
 
-In simulation the NMHE of 000 reads ``pose_measurement`` = [x y ψ r] from a pose sensor whose
-noise is RT of 000 eq. (16) (σ ≈ 2.2 cm in position: an RTK-class fix). On the boat the same
+In simulation the NMHE of Roboat II reads ``pose_measurement`` = [x y ψ r] from a pose sensor whose
+noise is RT of Roboat II eq. (16) (σ ≈ 2.2 cm in position: an RTK-class fix). On the boat the same
 vector comes from two devices: the GNSS receiver's fix (NMEA GGA → :class:`GpsFix`) converted to
 the world's local ENU frame with pyproj, and the IMU/AHRS's heading and yaw rate
 (:class:`ImuSample`: orientation quaternion and gyro z). This system is that conversion; it has

@@ -72,7 +72,7 @@ def _forces(vessel: VesselParams, thrust: np.ndarray) -> np.ndarray:
 
 
 def tracking_metrics(times: np.ndarray, states: np.ndarray, reference) -> dict:
-    """Position and heading RMSE [m, rad] of ground truth against a timed reference (000 §VI-B
+    """Position and heading RMSE [m, rad] of ground truth against a timed reference (Roboat II §VI-B
     reports 0.096 m and 0.149 rad for its NMPC on the Charles River)."""
     q_ref, _ = reference.sample(times)
     e_pos = np.hypot(states[:, 0] - q_ref[:, 0], states[:, 1] - q_ref[:, 1])
@@ -92,7 +92,8 @@ def estimation_metrics(
     pose=None,
     estimate_times: np.ndarray | None = None,
 ) -> dict:
-    """How well the estimator knows the state (000 §VI-B: NMHE velocities). ``estimate_times``:
+    """How well the estimator knows the state (Roboat II §VI-B: NMHE velocities).
+    ``estimate_times``:
     the instant each logged estimate refers to (the NMHE's ``estimate_time``); the truth is
     interpolated there (linearly: 10 Hz logs, waves at 0.5 Hz). Without it each estimate is
     compared with the truth logged with it. With ``pose`` (logged [x y ψ r] measurements) also
@@ -184,7 +185,8 @@ def slam_metrics(
 
 
 # [m] open water for the speed metric: the centre at least this far from every solid, where
-# 003 eq. (2) gives a look-ahead of ≥ 1.8 m. (Its 3 m maximum needs 2.1 m all round, which the
+# Ueland 2017 eq. (2) gives a look-ahead of ≥ 1.8 m. (Its 3 m maximum needs 2.1 m all round, which
+# the
 # 6.45 m basin with its obstacles never offers.)
 OPEN_WATER_CLEARANCE = 1.5
 CONTACT_CLEARANCE = 0.1  # [m] the exploration issue counts a hull closer than this as a collision
@@ -230,8 +232,8 @@ def exploration_metrics(
     finished_time: float | None,
     clearance: np.ndarray | None = None,
 ) -> dict:
-    """003's exploration run: coverage (:func:`explored_fraction`), safety (collisions =
-    episodes with the hull within 0.1 m of a solid) and the speeds of 003 Fig. 17: median
+    """Ueland 2017's exploration run: coverage (:func:`explored_fraction`), safety (collisions =
+    episodes with the hull within 0.1 m of a solid) and the speeds of Ueland 2017 Fig. 17: median
     speed inside the world's ``narrow_passage`` region and median speed while travelling
     (≥ 0.02 m/s) in open water, where the centre is ≥ 1.5 m from every solid
     (``OPEN_WATER_CLEARANCE``). ``clearance``: :func:`vessel_clearance` of ``states`` if known."""
@@ -318,7 +320,7 @@ def slam3d_counts(summary: Slam3DSummary) -> dict:
 def slam3d_metrics(
     times: np.ndarray, states: np.ndarray, slam_poses: np.ndarray, summary: Slam3DSummary
 ) -> dict:
-    """The 3D factor-graph SLAM (000 §V) against ground truth.
+    """The 3D factor-graph SLAM (Roboat II §V) against ground truth.
 
     times, states: ground truth (n × 6); slam_poses: the online [x y ψ] output at ``times``;
     summary: the SLAM's :class:`~usvdrake.systems.slam.slam_summary.Slam3DSummary` after the run.

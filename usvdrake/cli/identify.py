@@ -1,4 +1,4 @@
-"""``usvdrake identify``: fit ξ = [m11 m22 m33 Xu Yv Nr] to a log (000 eq. 9)."""
+"""``usvdrake identify``: fit ξ = [m11 m22 m33 Xu Yv Nr] to a log (Roboat II eq. 9)."""
 
 import json
 from pathlib import Path
@@ -37,7 +37,7 @@ def add_arguments(i) -> None:
 
 
 def run(args) -> int:
-    """000 eq. (9) on a log folder: table to stdout, DIR/xi.json and DIR/fit.png."""
+    """Roboat II eq. (9) on a log folder: table to stdout, DIR/xi.json and DIR/fit.png."""
     factors = (
         ident.DEFAULT_GUESS_FACTORS
         if args.initial_guess is None

@@ -1,4 +1,4 @@
-"""``usvdrake identify-data``: write a synthetic identification log (000 §VI-B)."""
+"""``usvdrake identify-data``: write a synthetic identification log (Roboat II §VI-B)."""
 
 from usvdrake.errors import ConfigError
 from usvdrake.systems.estimation.identification_data import (
@@ -18,7 +18,7 @@ def add_arguments(d) -> None:
 
 
 def run(args) -> int:
-    """A synthetic 000 §VI-B data set (true ξ from the vessel file) as a log folder."""
+    """A synthetic Roboat II §VI-B data set (true ξ from the vessel file) as a log folder."""
     experiment = ExcitationExperiment(trials=args.trials, duration_s=args.duration)
     if experiment.trials < 1 or not experiment.duration_s >= 1.0:
         raise ConfigError(

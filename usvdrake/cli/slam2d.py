@@ -1,4 +1,4 @@
-"""``usvdrake slam2d``: 2D graph SLAM (002) on recorded scans."""
+"""``usvdrake slam2d``: 2D graph SLAM (Pham et al.) on recorded scans."""
 
 from usvdrake.errors import ConfigError
 from usvdrake.run.slam2d import run_slam2d

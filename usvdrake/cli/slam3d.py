@@ -1,4 +1,4 @@
-"""``usvdrake slam3d``: lidar-IMU-GPS factor-graph SLAM (000 §V) on a recording."""
+"""``usvdrake slam3d``: lidar-IMU-GPS factor-graph SLAM (Roboat II §V) on a recording."""
 
 import json
 import sys

@@ -1,4 +1,4 @@
-"""``usvdrake slam3d-ablation``: 000 §VI-A's ablation (lidar / + GPS / + GPS + loop) on a
+"""``usvdrake slam3d-ablation``: Roboat II §VI-A's ablation (lidar / + GPS / + GPS + loop) on a
 recording or on a scenario recorded first."""
 
 import json
@@ -38,7 +38,7 @@ def add_arguments(ab) -> None:
 
 
 def run(args) -> int:
-    """000 §VI-A's ablation (lidar / + GPS / + GPS + loop) on a recording, or on a scenario
+    """Roboat II §VI-A's ablation (lidar / + GPS / + GPS + loop) on a recording, or on a scenario
     recorded first into DIR/recording: table to stdout, DIR/ablation.json, DIR/ablation.png."""
     out = Path(args.out)
     source = args.source
@@ -63,7 +63,7 @@ def run(args) -> int:
         json.dumps({"log": str(log), "variants": rows}, indent=2) + "\n"
     )
     plot_ablation(results, results[0].truth, out / "ablation.png")
-    print(f"usvdrake slam3d-ablation {log} (000 §VI-A)")
+    print(f"usvdrake slam3d-ablation {log} (Roboat II §VI-A)")
     print(format_table(rows))
     print(f"  ablation.json, ablation.png in {out}")
     return 0

@@ -1,6 +1,6 @@
 """Offline 2D SLAM on recorded scans (``usvdrake slam2d``): CARMEN logs and ROS 1/2 bags.
 
-Scan-only by default (no odometry, as 002's system runs; ``odometry=True`` adds a raw CARMEN
+Scan-only by default (no odometry, as Pham et al.'s system runs; ``odometry=True`` adds a raw CARMEN
 log's wheel odometry, calibrated by the scans): every scan goes through :class:`GraphSlam`; the
 output trajectory is every scan's pose re-expressed from its node after the last optimisation,
 stamped with the log's own timestamps. With a reference trajectory (e.g. a "corrected" log) the
@@ -31,7 +31,8 @@ from usvdrake.typed_yaml import ConfigError
 
 GARBAGE_KINDS = ("random", "half_empty", "nan")
 
-# The graph SLAM for scan streams at the sensor's rate (ROS bags, mission logs): 002's, a poor
+# The graph SLAM for scan streams at the sensor's rate (ROS bags, mission logs): Pham et al.'s, a
+# poor
 # match re-seeded by the correlative search.
 STREAM_CONFIG = GraphSlamConfig(correlative_trigger=1.0)
 

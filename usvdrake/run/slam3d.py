@@ -1,4 +1,5 @@
-"""Offline lidar-IMU-GPS SLAM (000 §V) on recorded sensors, and the ablation of 000 §VI-A.
+"""Offline lidar-IMU-GPS SLAM (Roboat II §V) on recorded sensors, and the ablation of Roboat II
+§VI-A.
 
 :func:`run_slam3d` replays the lidar sweeps, IMU samples and GNSS fixes of a mission log
 (``/lidar_points``, ``/imu``, ``/gps``) or a ROS bag (PointCloud2, Imu, NavSatFix; read by
@@ -16,7 +17,7 @@ exactly as the live :class:`~usvdrake.systems.slam.factor_graph_slam.FactorGraph
   last IMU sample, what the ``slam_pose`` port outputs — so :func:`slam3d_metrics` scores the
   offline run like the live one.
 
-:func:`ablation` runs the three variants of 000 §VI-A on one recording — lidar only, lidar +
+:func:`ablation` runs the three variants of Roboat II §VI-A on one recording — lidar only, lidar +
 GPS, lidar + GPS + loop closure — and :func:`format_table` / :func:`plot_ablation` show them.
 """
 
@@ -45,8 +46,8 @@ from usvdrake.systems.slam.slam_summary import summarise_3d
 SAME_TIME = 1e-6  # [s] messages closer than this are of one instant (ordered IMU, GPS, lidar)
 KIND_ORDER = {"imu": 0, "gps": 1, "lidar": 2}
 
-# the variants of 000 §VI-A: (name, use_gps, use_loop_closure), run without our water-level
-# factor (000's graph has none, and it would hide the vertical drift the ablation is about)
+# the variants of Roboat II §VI-A: (name, use_gps, use_loop_closure), run without our water-level
+# factor (Roboat II's graph has none, and it would hide the vertical drift the ablation is about)
 VARIANTS = (
     ("lidar", False, False),
     ("lidar+gps", True, False),
@@ -259,7 +260,8 @@ def variant_config(
 
 
 def run_ablation(path: str | Path, config: LidarInertialConfig, **kwargs) -> list[Slam3DResult]:
-    """The runs of 000 §VI-A's ablation on one recording, one after the other (:data:`VARIANTS`:
+    """The runs of Roboat II §VI-A's ablation on one recording, one after the other
+    (:data:`VARIANTS`:
     lidar only; lidar + GPS; lidar + GPS + loop closure — without the water-level factor), and,
     when ``config`` has the water-level factor, the full graph with it (:data:`WATER_VARIANT`);
     ``kwargs`` go to :func:`run_slam3d`. ``config`` is not modified."""
@@ -286,7 +288,7 @@ def ablation_rows(results: list[Slam3DResult]) -> list[dict]:
 
 
 def ablation(path: str | Path, config: LidarInertialConfig, **kwargs) -> list[dict]:
-    """000 §VI-A's ablation as rows (:func:`run_ablation`, :func:`ablation_rows`)."""
+    """Roboat II §VI-A's ablation as rows (:func:`run_ablation`, :func:`ablation_rows`)."""
     return ablation_rows(run_ablation(path, config, **kwargs))
 
 
@@ -351,7 +353,7 @@ def plot_ablation(
     for ax in (ax_xy, ax_z):
         ax.grid(alpha=0.3)
         ax.legend(loc="best", fontsize=8)
-    fig.suptitle("000 §VI-A ablation: lidar / + GPS / + GPS + loop closure")
+    fig.suptitle("Roboat II §VI-A ablation: lidar / + GPS / + GPS + loop closure")
     fig.tight_layout()
     path = Path(path)
     fig.savefig(path, dpi=120)

@@ -36,7 +36,8 @@ class Datum:
 
 
 DATUMS: dict[str, Datum] = {
-    # Amsterdam canal ring: Herengracht by the Leidsegracht, the waters Roboat II sails in (000
+    # Amsterdam canal ring: Herengracht by the Leidsegracht, the waters Roboat II sails in (Roboat
+    # II
     # §VI). Height: the Dutch quasi-geoid (NLGEO2018) lies about 43 m above the ellipsoid here
     # (RDNAPTRANS™2018 uses a fixed 43 m as the Dutch mean), and the canal-ring water level
     # ("grachtenpeil") is held at NAP −0.40 m, so the water surface is ≈ 42.6 m ellipsoidal.
@@ -45,7 +46,8 @@ DATUMS: dict[str, Datum] = {
     # prototypes were first tested. Geoid undulation about −28.3 m (NGS GEOID18 around Boston);
     # the basin is held by the Charles River Dam at roughly +0.5 m NAVD88, so ≈ −27.8 m.
     "charles_river": Datum("charles_river", 42.3566, -71.0865, -27.8),
-    # NTNU, Trondheim: the coordinates of 003's home (the Marine Technology Centre basin area;
+    # NTNU, Trondheim: the coordinates of Ueland 2017's home (the Marine Technology Centre basin
+    # area;
     # the point itself is on the Gløshaugen campus, the Tyholt basins ~2 km east — any nearby
     # point serves as an ENU origin). Geoid undulation ≈ 40 m (NN2000 geoid over Trondheim);
     # height taken at sea level (Trondheimsfjord), i.e. ≈ 40 m ellipsoidal, for open-water runs.

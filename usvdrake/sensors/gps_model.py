@@ -13,7 +13,7 @@ Measurement model, at fix k (time t_k = k / rate):
   estimator, which a real receiver never allows; the Gauss-Markov process keeps the simulated
   estimator as humble as the real one. ``noise_time_constant = 0`` gives white noise.
 * b: a slow **altitude bias**, Gauss-Markov with std σ_b and time constant T_b, starting at 0 —
-  the "altitude errors approximating 100 m" over the 3-hour Amsterdam run of 000 §VI-A. With
+  the "altitude errors approximating 100 m" over the 3-hour Amsterdam run of Roboat II §VI-A. With
   σ_b = 50 m and T_b = 30 min the error wanders to ±50-100 m within the first hour.
 * s = 1 + (κ − 1) β: the urban-canyon degradation for β ∈ [0, 1] the fraction of the sky above
   30° elevation hidden by buildings and κ = ``degraded_std_factor``. It scales the position and
@@ -49,7 +49,7 @@ class GpsConfig:
     enabled: bool = True  # False: the receiver never has a fix (every output invalid)
     datum: str = ""  # origin of the world ENU frame, a name in geodesy.DATUMS; "": the world's
     # [Hz] fix rate. u-blox M8/F9 receivers navigate at 1-10 Hz (F9P up to 20 Hz); 5 Hz leaves
-    # SLAM's 10 Hz keyframes (000 §VI) a fresh fix every other frame.
+    # SLAM's 10 Hz keyframes (Roboat II §VI) a fresh fix every other frame.
     rate_hz: float = 5.0
     # [m] 1σ per horizontal axis, open sky. u-blox ZED-F9P standalone: 1.5 m CEP; NEO-M8N:
     # 2.5 m CEP; CEP = 1.1774 σ for a circular normal → 1.3-2.1 m. 1.5 m sits between them.
@@ -57,7 +57,7 @@ class GpsConfig:
     vertical_std: float = 3.0  # [m] 1σ fast vertical noise, open sky (GNSS VDOP ≈ 2 × HDOP)
     noise_time_constant: float = 30.0  # [s] correlation time of the position noise; 0: white
     # [m] stationary std of the slow altitude bias; with the 30 min time constant it reaches
-    # the ~100 m altitude errors 000 §VI-A reports over 3 hours (2σ).
+    # the ~100 m altitude errors Roboat II §VI-A reports over 3 hours (2σ).
     altitude_error_std: float = 50.0
     altitude_error_time_constant: float = 1800.0  # [s] correlation time of that bias
     # [-] noise multiplier when the whole sky above 30° is blocked. Urban-canyon fixes are
@@ -159,6 +159,6 @@ class GpsModel:
 
 
 def world_velocity(q: np.ndarray) -> np.ndarray:
-    """[v_E, v_N] [m/s] of a vessel state q = [x y ψ u v r] (000 eq. 1)."""
+    """[v_E, v_N] [m/s] of a vessel state q = [x y ψ u v r] (Roboat II eq. 1)."""
     c, s = np.cos(q[2]), np.sin(q[2])
     return np.array([c * q[3] - s * q[4], s * q[3] + c * q[4]])

@@ -21,7 +21,7 @@ class Imu(LeafSystem):
         - imu
 
     ``state`` = [x y ψ u v r] [m, rad, m/s, rad/s]; ``acceleration`` = [u̇ v̇ ṙ] [m/s², rad/s²],
-    body frame (the plant's ν̇, 000 eq. 2). ``imu``: the last
+    body frame (the plant's ν̇, Roboat II eq. 2). ``imu``: the last
     :class:`~usvdrake.sensors.messages.ImuSample` (angular velocity, specific force, AHRS
     orientation), body frame x forward, y left, z up.
 

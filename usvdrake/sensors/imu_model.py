@@ -26,7 +26,7 @@ Measurement model in the body frame (x forward, y left, z up), sample k at t_k =
   0 gives white noise.
 
 Default numbers: **LORD/HBK MicroStrain 3DM-GX5-25** AHRS — the IMU of LIO-SAM's datasets
-(Shan et al. 2020), the lidar-inertial SLAM the Roboat II system follows (000 §V). Datasheet
+(Shan et al. 2020), the lidar-inertial SLAM the Roboat II system follows (Roboat II §V). Datasheet
 8400-0093 rev N: gyro noise density 0.005 °/s/√Hz, bias instability 8 °/h, initial bias error
 ±0.04 °/s; accelerometer noise density 20 µg/√Hz (0.00002 g/√Hz), bias instability 0.04 mg,
 initial bias error ±0.002 g; EKF heading accuracy ±0.8° RMS. The two noise densities are as
@@ -83,7 +83,7 @@ def bias_random_walk_density(std: float, time_constant: float) -> float:
 def specific_force(q: np.ndarray, nu_dot: np.ndarray, gravity: float, lever_arm=(0.0, 0.0)):
     """Body-frame specific force [m/s²] of a planar vessel at the lever arm (see module doc).
 
-    q = [x y ψ u v r], nu_dot = [u̇ v̇ ṙ] (000 eq. 2)."""
+    q = [x y ψ u v r], nu_dot = [u̇ v̇ ṙ] (Roboat II eq. 2)."""
     u, v, r = q[3], q[4], q[5]
     du, dv, dr = nu_dot[0], nu_dot[1], nu_dot[2]
     lx, ly = lever_arm[0], lever_arm[1]

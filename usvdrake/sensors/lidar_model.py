@@ -1,13 +1,14 @@
 """Lidar models: device presets, beam layouts, the sweep's own motion, and range noise.
 
 Presets (datasheet numbers; the papers' sensors):
-* ``rplidar_a1`` — Slamtec RPLIDAR A1 (003): 360°, ~1° steps as 003 uses it, 0.15-12 m,
+* ``rplidar_a1`` — Slamtec RPLIDAR A1 (Ueland 2017): 360°, ~1° steps as Ueland 2017 uses it, 0.15-12
+m,
   5.5 Hz; accuracy 1 % of range up to 3 m, 2.5 % beyond (RPLIDAR A1 datasheet v2.x: "1 % of the
   range (≤ 3 m), 2 % (3-5 m), 2.5 % (5-25 m)") → σ = 0.01 r (we use the ≤ 3-5 m figure).
-* ``hokuyo_utm30lx`` — Hokuyo UTM-30LX (002): 270°, 0.25° (1081 beams), 0.1-30 m, 40 Hz,
+* ``hokuyo_utm30lx`` — Hokuyo UTM-30LX (Pham et al.): 270°, 0.25° (1081 beams), 0.1-30 m, 40 Hz,
   accuracy ±30 mm to 10 m and ±50 mm to 30 m (UTM-30LX specification) → σ ≈ 0.01 + 0.0013 r.
-* ``hokuyo_utm30lx_sim60`` — the same with the 60 m range 002 §V-B uses in Gazebo.
-* ``vlp16`` — Velodyne VLP-16 (000): 16 rings at −15°…+15° every 2°, 0.2° azimuth at 10 Hz
+* ``hokuyo_utm30lx_sim60`` — the same with the 60 m range Pham et al. §V-B uses in Gazebo.
+* ``vlp16`` — Velodyne VLP-16 (Roboat II): 16 rings at −15°…+15° every 2°, 0.2° azimuth at 10 Hz
   (1800 columns), 100 m, ±3 cm typical accuracy (VLP-16 datasheet) → σ = 0.03 m; min 0.5 m.
 
 Each beam is cast from where the sensor was when that beam fired (``motion``): the sensor pose
@@ -88,7 +89,7 @@ class LidarConfig:
     motion: bool = True  # cast each beam from where the sensor was when it fired
     noise: bool = True  # add range noise (σ from the preset)
     dropout: float = 0.0  # [-] probability that a beam returns nothing
-    # Sun glare (000 §VI-A: false returns on sunny days). On a fraction ``glare_fraction`` of
+    # Sun glare (Roboat II §VI-A: false returns on sunny days). On a fraction ``glare_fraction`` of
     # the sweeps, the beams pointing within ±``glare_width_deg``/2 of the sun's azimuth
     # ``glare_azimuth_deg`` (world frame, ENU, counter-clockwise from east) return, with
     # probability ``glare_beam_fraction`` each, a false range drawn uniformly between the

@@ -1,14 +1,15 @@
 """``PoseSensor``: sampled, noisy [x y ψ r] behind ``pose_measurement``.
 
 It stands in for Roboat II's lidar-SLAM pose and IMU yaw rate: the first four entries of the
-measurement vector z = [x y ψ r f1 f2 f3 f4] of 000 eq. (8) (the forces come from
+measurement vector z = [x y ψ r f1 f2 f3 f4] of Roboat II eq. (8) (the forces come from
 ``ThrustSensor``). The model is
 
     z_k = [x y ψ r]ᵀ(t_k) + σ ⊙ w_k   (then ψ wrapped to [−π, π)),   t_k = k / rate,
     w_k ~ N(0, I) keyed by (seed, stream 501, k)
 
 with the defaults σ = (√0.0005 m, √0.0005 m, √0.0005 rad, √0.0001 rad/s) ≈ (0.022, 0.022,
-0.022, 0.01): the square roots of the measurement covariance RT⁻¹ of 000 eq. (16), so the NMHE's
+0.022, 0.01): the square roots of the measurement covariance RT⁻¹ of Roboat II eq. (16), so the
+NMHE's
 weights are the true inverse covariances. The heading is wrapped as a SLAM or AHRS heading is;
 the estimator unwraps it.
 """
@@ -25,11 +26,11 @@ STREAM_POSE = 501
 
 @dataclass
 class PoseSensorConfig:
-    rate_hz: float = 10.0  # [Hz] sampling rate (000 §VI: SLAM and estimator at 10 Hz)
-    x_std: float = float(np.sqrt(0.0005))  # [m] 1σ east position error (000 eq. 16)
-    y_std: float = float(np.sqrt(0.0005))  # [m] 1σ north position error (000 eq. 16)
-    psi_std: float = float(np.sqrt(0.0005))  # [rad] 1σ heading error (000 eq. 16)
-    r_std: float = float(np.sqrt(0.0001))  # [rad/s] 1σ yaw-rate error (000 eq. 16)
+    rate_hz: float = 10.0  # [Hz] sampling rate (Roboat II §VI: SLAM and estimator at 10 Hz)
+    x_std: float = float(np.sqrt(0.0005))  # [m] 1σ east position error (Roboat II eq. 16)
+    y_std: float = float(np.sqrt(0.0005))  # [m] 1σ north position error (Roboat II eq. 16)
+    psi_std: float = float(np.sqrt(0.0005))  # [rad] 1σ heading error (Roboat II eq. 16)
+    r_std: float = float(np.sqrt(0.0001))  # [rad/s] 1σ yaw-rate error (Roboat II eq. 16)
 
     def std(self) -> np.ndarray:
         """[σ_x, σ_y, σ_ψ, σ_r] [m, m, rad, rad/s]."""

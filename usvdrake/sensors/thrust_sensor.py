@@ -1,8 +1,8 @@
 """``ThrustSensor``: sampled, noisy per-thruster feedback behind ``thrust_measured``.
 
-The Roboat II measurement vector z = [x y ψ r f1 f2 f3 f4] (000 eq. 8) includes the four
+The Roboat II measurement vector z = [x y ψ r f1 f2 f3 f4] (Roboat II eq. 8) includes the four
 thruster forces; on the water they come from the ESCs' RPM (T200: F ≈ c n|n|), and the NTNU
-vessel measures RPM with Hall-effect sensors (003 §"hardware"). The model is
+vessel measures RPM with Hall-effect sensors (Ueland 2017 §"hardware"). The model is
 
     z_k = u(t_k) + σ ⊙ w_k,        t_k = k / rate,   w_k ~ N(0, I) keyed by (seed, stream, k)
 
@@ -29,7 +29,7 @@ STREAM_THRUST = 301
 
 @dataclass
 class ThrustSensorConfig:
-    rate_hz: float = 10.0  # [Hz] sampling rate (000 runs its estimator at 10 Hz)
+    rate_hz: float = 10.0  # [Hz] sampling rate (Roboat II runs its estimator at 10 Hz)
     force_noise_fraction: float = 0.02  # [-] 1σ force error as a fraction of max_force
     angle_noise_std: float = 0.0175  # [rad] 1σ azimuth angle error (1°)
 

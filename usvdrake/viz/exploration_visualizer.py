@@ -1,4 +1,5 @@
-"""``ExplorationVisualizer``: 003's operator display in Meshcat (§Operator Interaction) — the
+"""``ExplorationVisualizer``: Ueland 2017's operator display in Meshcat (§Operator Interaction) —
+the
 planned path, its destination, the frontier cells and the setpoint, drawn live over the SLAM
 map (drawn by :class:`~usvdrake.viz.occupancy_visualizer.OccupancyVisualizer`)."""
 

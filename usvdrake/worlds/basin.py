@@ -1,18 +1,23 @@
-"""The NTNU Marine Cybernetics Laboratory basin as set up for lidar exploration (003, section
+"""The NTNU Marine Cybernetics Laboratory basin as set up for lidar exploration (Ueland 2017,
+section
 Experimental Results): a 40 m × 6.45 m basin with concrete walls, a sloped wave-generator end,
 an open middle section with camera mounts, other vessels and hinders on wooden planks, a narrow
-passage (position B of 003 Fig. 16) and a labyrinth-like section.
+passage (position B of Ueland 2017 Fig. 16) and a labyrinth-like section.
 
 Frame: the origin is the south-west corner of the water, x east along the 40 m length, y north
 across the 6.45 m width, z up from the water surface. The wave generator closes the west end
-(x = 0, "the wall on the very left hand of the basin" in 003), the labyrinth the east end.
+(x = 0, "the wall on the very left hand of the basin" in Ueland 2017), the labyrinth the east end.
 
-Only the basin's size comes from 003; the paper shows the set-up in photographs (Figs. 14, 16)
+Only the basin's size comes from Ueland 2017; the paper shows the set-up in photographs (Figs. 14,
+16)
 that the text extraction lost, so the positions, sizes and heights below are guesses, chosen so
-that a 0.548 m round vessel (003, Experimental Platform) whose planner inflates the map by 0.4 m
-(003, Map Processing) reaches every part of the basin: a disc of radius 0.3 m + 0.4 m must pass
+that a 0.548 m round vessel (Ueland 2017, Experimental Platform) whose planner inflates the map by
+0.4 m
+(Ueland 2017, Map Processing) reaches every part of the basin: a disc of radius 0.3 m + 0.4 m must
+pass
 every corridor and gap, which on a 0.1 m ground-truth grid (each wall also blackens the cells it
-touches) takes 1.8 m. The narrow passage is therefore 1.8-2.0 m wide (003 gives no width); with
+touches) takes 1.8 m. The narrow passage is therefore 1.8-2.0 m wide (Ueland 2017 gives no width);
+with
 ~0.6 m free on each side of the vessel it is still where the velocity law slows it down.
 Everything random comes from ``numpy.random.default_rng(seed)`` and only moves things within
 those limits.
@@ -24,8 +29,8 @@ import shapely
 from usvdrake.worlds.solids import Solid, box, cylinder, prism
 from usvdrake.worlds.world import World
 
-LENGTH = 40.0  # [m] basin length (003: "length and width of 40 m and 6.45 m")
-WIDTH = 6.45  # [m] basin width (003)
+LENGTH = 40.0  # [m] basin length (Ueland 2017: "length and width of 40 m and 6.45 m")
+WIDTH = 6.45  # [m] basin width (Ueland 2017)
 WALL_THICKNESS = 0.5  # [m] concrete walls (guess)
 WALL_BOTTOM = -1.5  # [m] the walls reach the floor (MC-Lab is 1.5 m deep)
 WALL_TOP = 0.8  # [m] wall top above the water (guess: the lidar on the vessel lid sees it)
@@ -42,7 +47,8 @@ START = (1.5, WIDTH / 2)  # [m] a free point near the wave-generator end
 
 
 def _beach() -> Solid:
-    """The wave generator's smooth sloped face (003: "not purely vertical"): the solid behind
+    """The wave generator's smooth sloped face (Ueland 2017: "not purely vertical"): the solid
+    behind
     x = 0 under the plane z = −x tan(slope), so a horizontal beam at height z meets it at
     x = −z / tan(slope), farther the higher the beam."""
     t = np.tan(BEACH_SLOPE)
@@ -110,7 +116,7 @@ def _obstacle_group(kind: str, rng: np.random.Generator, x: float, y: float) -> 
     if kind == "boat":  # another model vessel (guess: 1-2 m long, 0.4-0.8 m beam)
         length, beam = rng.uniform(1.0, 2.0), rng.uniform(0.4, 0.8)
         return [box("boat", x, y, length, beam, yaw, -0.3, rng.uniform(0.4, 0.6))]
-    # A wooden plank floating at the surface with two hinders standing on it (003: "hinders
+    # A wooden plank floating at the surface with two hinders standing on it (Ueland 2017: "hinders
     # placed on wooden planks"); the plank alone is below a lidar's beam, the hinders are not.
     length = rng.uniform(2.0, 3.0)
     c, s = np.cos(yaw), np.sin(yaw)
@@ -122,8 +128,9 @@ def _obstacle_group(kind: str, rng: np.random.Generator, x: float, y: float) -> 
 
 
 def ntnu_basin(seed: int = 0) -> World:
-    """The 40 m × 6.45 m NTNU basin of 003 (Experimental Results) with a sloped wave-generator
-    end, a middle section holding 3 camera mounts, 2 vessels and 2 planks with hinders (003:
+    """The 40 m × 6.45 m NTNU basin of Ueland 2017 (Experimental Results) with a sloped
+    wave-generator
+    end, a middle section holding 3 camera mounts, 2 vessels and 2 planks with hinders (Ueland 2017:
     "camera mounts, other vessels, and hinders placed on wooden planks"), a narrow passage
     (position B) and a labyrinth-like section. Obstacle positions and the labyrinth's
     spacing vary with ``seed``; every part stays reachable from :data:`START`."""

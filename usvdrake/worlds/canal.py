@@ -213,7 +213,8 @@ def _arc(radius: float, a0_deg: float, a1_deg: float, step: float = 10.0) -> lis
 
 
 def charles_river(seed: int = 0) -> World:
-    """A reach like the Charles River basin where 000 §VI-B tested NMPC and NMHE: 200 m of open
+    """A reach like the Charles River basin where Roboat II §VI-B tested NMPC and NMHE: 200 m of
+    open
     water (the real basin is ~500 m wide), 900 m long with a gentle bend, walled banks, a few
     moored boats and one long bridge (like the Harvard Bridge). Local origin mid-reach."""
     return canal_network(
@@ -246,7 +247,7 @@ def amsterdam_canal_lines() -> list[Canal]:
 
 
 def amsterdam_canals(seed: int = 0) -> World:
-    """A canal ring after Amsterdam's grachtengordel (000 §VI-A): two concentric arcs (radii
+    """A canal ring after Amsterdam's grachtengordel (Roboat II §VI-A): two concentric arcs (radii
     250 m and 330 m, 20 m wide, like Herengracht and Keizersgracht) joined by three radial
     canals into closed loops, and a 45 m wide river (like the Amstel) crossing both for tracking
     tests; 8 bridges, moored boats, facades 8-20 m tall. ~2.2 km of centre line. The local

@@ -1,4 +1,4 @@
-"""Lakes with natural shores for 2D lidar SLAM (002, §V): the 200 m × 200 m Gazebo valley of
+"""Lakes with natural shores for 2D lidar SLAM (Pham et al., §V): the 200 m × 200 m Gazebo valley of
 §V-B and Phu Tho lake in Ho Chi Minh City of §V-C.
 
 A lake's water is a star-shaped polygon around the origin (the lake's middle), its radius a
@@ -11,7 +11,7 @@ signed distance across the water's edge (negative: in the water): rocks (random 
 trees (tall cylinders), bushes (cylinders and convex prisms) and, at Phu Tho, leaves overhanging
 the water. Everything random comes from ``numpy.random.default_rng(seed)``.
 
-002 gives the worlds' sizes and sensors but no geometry (its figures were lost in the text
+Pham et al. gives the worlds' sizes and sensors but no geometry (its figures were lost in the text
 extraction): every size, count and height below is a guess, stated with its reason. Counts are
 kept such that a 1081-beam Hokuyo scan from 10-30 m off the valley's shore casts well within
 1 ms (~1500 (solid, beam) pairs, ~0.4 ms; the ray caster's cost grows with that number).
@@ -207,7 +207,7 @@ def _leaves(rng: np.random.Generator, c: np.ndarray, m: np.ndarray, r: float) ->
 
 
 def valley(seed: int = 0) -> World:
-    """The Gazebo valley of 002 §V-B ("a valley of size 200x200m"): about 200 m × 200 m of
+    """The Gazebo valley of Pham et al. §V-B ("a valley of size 200x200m"): about 200 m × 200 m of
     water inside an irregular natural shore.
 
     Guessed, to look like a valley lake and to suit the simulated 60 m, 270° lidar: bays and
@@ -227,23 +227,26 @@ def valley(seed: int = 0) -> World:
         seed=seed,
         solids=solids,
         water=shapely.Polygon(ring),
-        datum="ho_chi_minh_city",  # 002 is from Vietnam; the Gazebo world has no place of its own
+        # Pham et al. is from Vietnam; the Gazebo world has no place of its own
+        datum="ho_chi_minh_city",
         description=(
             "~200 m x 200 m valley lake with an irregular shore of rocks, trees and bushes and "
-            "four rocky islets (002 §V-B)"
+            "four rocky islets (Pham et al. §V-B)"
         ),
     )
 
 
 def phu_tho_lake(seed: int = 0) -> World:
-    """Phu Tho lake, Ho Chi Minh City (002 §V-C): a lake shore "cluttered with leaves and
+    """Phu Tho lake, Ho Chi Minh City (Pham et al. §V-C): a lake shore "cluttered with leaves and
     bushes" that the USV2000 followed closely with a Hokuyo UTM-30LX.
 
-    Guessed: about 150 m × 100 m (a park lake; 002 gives no size), a 2 m bank 0.8-1.2 m above
+    Guessed: about 150 m × 100 m (a park lake; Pham et al. gives no size), a 2 m bank 0.8-1.2 m
+    above
     the water, a bush every ~2.5 m of shore and trees every ~10 m, and in front of each bush
     4-10 "leaf" solids (2-30 cm across, 5-30 cm tall) hanging over the water 0.2-1.5 m up and up
     to 1.5 m out from the bush: a horizontal scan at 0.3-0.6 m cuts some of them, so short-range
-    returns are scattered and change with the sensor's height and position, as 002 describes."""
+    returns are scattered and change with the sensor's height and position, as Pham et al.
+    describes."""
     rng = np.random.default_rng(seed)
     ring = _shore(rng, (75.0, 50.0), amplitude=0.15, roughness=0.015, step=4.0)
     heights = rng.uniform(0.8, 1.2, len(ring))
@@ -266,6 +269,6 @@ def phu_tho_lake(seed: int = 0) -> World:
         datum="ho_chi_minh_city",
         description=(
             "~150 m x 100 m park lake whose shore is dense with bushes, trees and overhanging "
-            "leaves (002 §V-C)"
+            "leaves (Pham et al. §V-C)"
         ),
     )

@@ -53,7 +53,7 @@ class World:
     gps_denied: shapely.Geometry = field(default_factory=shapely.Polygon)  # no fix inside
     datum: str = "amsterdam"  # GPS datum of the local frame's origin
     description: str = ""
-    # Named areas for metrics, e.g. "narrow_passage" (003's position B) in ntnu_basin
+    # Named areas for metrics, e.g. "narrow_passage" (Ueland 2017's position B) in ntnu_basin
     regions: dict = field(default_factory=dict)
     _sky_cache: dict = field(default_factory=dict, repr=False, compare=False)
 
@@ -175,7 +175,7 @@ class World:
 
 def hull_outline(length: float, beam: float, n_per_side: int = 4, shape: str = "box") -> np.ndarray:
     """Sample points (k × 2) on the hull outline, body frame: a ``length`` × ``beam`` rectangle,
-    or for ``shape="round"`` (003's cone-like vessel) the circle of diameter ``length`` (the
+    or for ``shape="round"`` (Ueland 2017's cone-like vessel) the circle of diameter ``length`` (the
     widest, top diameter), 8 ``n_per_side`` points."""
     if shape == "round":
         a = np.linspace(0.0, 2.0 * np.pi, 8 * n_per_side, endpoint=False)

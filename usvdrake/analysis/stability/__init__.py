@@ -1,7 +1,7 @@
 """Closed-loop stability analysis: linearisations, pole maps, margins, Lyapunov/SOS regions.
 
 Everything here is numerical and checkable by hand; the tests compare each piece with a closed
-form. Conventions: plant state q = [x y ψ u v r] (000 eq. 7), generalised force τ = [X Y N]
+form. Conventions: plant state q = [x y ψ u v r] (Roboat II eq. 7), generalised force τ = [X Y N]
 (body frame), a controller is linearised as τ − τ* = H (state − trim).
 
 The package is cut by job: ``linearisation`` (the plant about a straight run, ZOH, Jacobians),

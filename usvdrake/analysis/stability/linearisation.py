@@ -3,7 +3,7 @@ names, the default trim speed, the input matrix ∂q̇/∂τ, Drake's ``Lineariz
 :class:`VesselPlant` about a straight run and its eigenvalues in closed form, the exact
 zero-order-hold discretisation, and Jacobians by AutoDiff and by central differences.
 
-**Plant** (000 eqs. 1-6, ``vessel_dynamics``): :func:`linearize_plant` runs Drake's
+**Plant** (Roboat II eqs. 1-6, ``vessel_dynamics``): :func:`linearize_plant` runs Drake's
 ``Linearize`` on :class:`VesselPlant` about a straight run at surge speed u0 with its trim thrust
 [Xu u0, 0, 0] (not an equilibrium: x grows, so ``equilibrium_check_tolerance=inf``). By hand
 (``straight_run_jacobian``) the eigenvalues are 0, 0, 0 (x, y, ψ: no restoring force), −Xu/m11

@@ -1,6 +1,6 @@
 """Baseline heading + speed control law for 3-DOF vessels (the demo's controller).
 
-Model-based PD with feedback linearisation of 000 eqs. (2), (4)-(6) (Fossen 2011 §12.2):
+Model-based PD with feedback linearisation of Roboat II eqs. (2), (4)-(6) (Fossen 2011 §12.2):
     τ_X = Xu u_d + m11 k_u (u_d − u) − m22 v r
     τ_Y = −m22 k_v v + m11 u r                       (holonomic vessels hold zero sway)
     τ_N = m33 (ω² e_ψ − 2 ζ ω r) + Nr r + (m22 − m11) u v,   e_ψ = wrap(ψ_d − ψ)

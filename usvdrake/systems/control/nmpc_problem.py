@@ -1,4 +1,5 @@
-"""Nonlinear MPC of 000 §IV-B (eqs. 10-14) on Drake's MathematicalProgram, solved in real time.
+"""Nonlinear MPC of Roboat II §IV-B (eqs. 10-14) on Drake's MathematicalProgram, solved in real
+time.
 
     min  ½ Σ_k ‖q_k − q_ref,k‖²_Wq + ‖u_k − u_ref,k‖²_Wu  +  ‖q_N − q_ref,N‖²_WN      (10a)
     s.t. q_0 = q̂                                                                    (10b)
@@ -37,8 +38,8 @@ NX, HEADING = 6, 2
 
 @dataclass
 class NmpcConfig:
-    horizon: float = 4.0  # [s] prediction horizon N_c (000 §IV-B)
-    dt: float = 0.1  # [s] shooting interval = control period (10 Hz, 000 §VI)
+    horizon: float = 4.0  # [s] prediction horizon N_c (Roboat II §IV-B)
+    dt: float = 0.1  # [s] shooting interval = control period (10 Hz, Roboat II §VI)
     # [s] the update runs this long after the instants k·dt (the sensors'), after the
     # estimator's (NMHE: 1 ms), so it acts on the state estimated from the samples just taken
     update_offset: float = 0.002
@@ -85,7 +86,8 @@ def wrap_reference(q_ref: np.ndarray, psi_now: float) -> np.ndarray:
 
 
 class NmpcProblem:
-    """The OCP of eqs. (10)-(14) for one vessel with fixed thrusters (000's Roboat II layout)."""
+    """The OCP of eqs. (10)-(14) for one vessel with fixed thrusters (Roboat II's Roboat II
+    layout)."""
 
     def __init__(self, vessel: VesselParams, cfg: NmpcConfig):
         if any(t.azimuth for t in vessel.thrusters):

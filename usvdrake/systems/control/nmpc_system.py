@@ -1,4 +1,4 @@
-"""``Nmpc``: the NMPC of 000 §IV-B as a 10 Hz LeafSystem with zero-order hold."""
+"""``Nmpc``: the NMPC of Roboat II §IV-B as a 10 Hz LeafSystem with zero-order hold."""
 
 from dataclasses import dataclass, field
 

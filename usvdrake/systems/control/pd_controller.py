@@ -1,4 +1,5 @@
-"""Nonlinear PD tracking controller of 003's motion controller (Fossen 2011 §12.2 DP-style PD).
+"""Nonlinear PD tracking controller of Ueland 2017's motion controller (Fossen 2011 §12.2 DP-style
+PD).
 
 With the reference model's [η_d, η̇_d, η̈_d] (world frame), the estimate [η̂, ν̂] and bias b̂
 (world frame) of the passive observer:
@@ -11,7 +12,8 @@ error ψ̂ − ψ_d is wrapped to (−π, π]). Kp acts on the position error ex
 frame, Kp Rᵀ(ψ̂) η̃ as in Fossen's DP PID (Fossen 2011 §12.2, our reading; the form Rᵀ Kp η̃ is
 the same when Kp_x = Kp_y, as for the round hull), so that Kp pairs with the body-frame M and D
 below at any heading. The first two terms are the model feed-forward of
-M ν̇ + D ν = τ (000 eq. 2 without Coriolis, negligible at 003's 0–0.3 m/s and zero for the
+M ν̇ + D ν = τ (Roboat II eq. 2 without Coriolis, negligible at Ueland 2017's 0–0.3 m/s and zero for
+the
 round hull's m11 = m22 when r = 0); the last cancels the estimated environmental force.
 
 Gains from a closed-loop natural frequency ω_n and damping ζ per DOF:
@@ -23,7 +25,7 @@ M ë + (D + Kd) ė + Kp e = 0, i.e. ë + 2ζω_n ė + ω_n² e = 0 per DOF unles
 (then the damping is the hull's own, larger than asked). Defaults for ntnu_round (our choice): ω_n =
 0.5 rad/s in surge/sway (above the reference model's ω = 0.3 rad/s, below the observer's
 ≈ 0.9 rad/s error poles; Kp = 2 N/m, Kd = 1.2 kg/s on top of Xu = 6 kg/s — at ω_n = 0.4 the
-hull's own drag would already exceed 2ζω_n M and Kd would clip to 0), 1.5 rad/s in yaw (003:
+hull's own drag would already exceed 2ζω_n M and Kd would clip to 0), 1.5 rad/s in yaw (Ueland 2017:
 "very low damping in yaw"; with m33 = 0.12 kg m² a stiff heading hold costs little moment:
 Kp_ψ = 0.27 N m/rad, Kd_ψ ≈ 0.29 N m s/rad versus Nr = 0.03, against the ~1 N m the
 thrusters give), ζ = 0.9 throughout; 10 Hz update rate (ω_n h ≤ 0.15).

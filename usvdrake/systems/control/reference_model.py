@@ -1,4 +1,5 @@
-"""Third-order position/heading reference model of 003's motion controller (Fossen 2011 §10.2.1).
+"""Third-order position/heading reference model of Ueland 2017's motion controller (Fossen 2011
+§10.2.1).
 
 Per degree of freedom the linear model is the low-pass filter of Fossen 2011 §10.2.1 (the
 cascade of a first-order filter and a mass-damper-spring system)
@@ -49,11 +50,13 @@ _PLANAR = slice(0, 2)
 
 @dataclass
 class ReferenceModelConfig:
-    """Tuning of the third-order reference model (defaults for 003's ntnu_round vessel)."""
+    """Tuning of the third-order reference model (defaults for Ueland 2017's ntnu_round vessel)."""
 
     omega: float = 0.3  # [rad/s] ω, natural frequency (planar DOFs; heading too unless set)
     zeta: float = 1.0  # ζ, relative damping
-    v_max: float = 0.25  # [m/s] limit on the planar speed √(ẋ_d² + ẏ_d²) (003: 0.25 m/s cruise)
+    v_max: float = (
+        0.25  # [m/s] limit on the planar speed √(ẋ_d² + ẏ_d²) (Ueland 2017: 0.25 m/s cruise)
+    )
     a_max: float = 0.1  # [m/s²] limit on the planar acceleration norm
     r_max: float = 0.3  # [rad/s] limit on |ψ̇_d|
     yaw_acc_max: float = 0.5  # [rad/s²] limit on |ψ̈_d|

@@ -1,4 +1,4 @@
-"""Grey-box identification of ξ = [m11 m22 m33 Xu Yv Nr] by SQP: 000 §IV-A, eq. (9).
+"""Grey-box identification of ξ = [m11 m22 m33 Xu Yv Nr] by SQP: Roboat II §IV-A, eq. (9).
 
     min_ξ  Σ_trials Σ_t ε(t)ᵀ w ε(t)                                   (9a)
     s.t.   ξl ≤ ξ ≤ ξu                                                  (9b)
@@ -20,7 +20,8 @@ The gradient is exact for this discrete cost: the forward sensitivities S = ∂�
 sample) are propagated through the same RK4 stages (RK4 applied to the variational equation
 Ṡ = ∂f/∂ν S + ∂f/∂ξ gives exactly the derivative of the RK4 map), in numpy over the trial batch.
 
-SNOPT (an SQP method, as 000 uses because it keeps the bounds at every iterate) solves (9) through
+SNOPT (an SQP method, as Roboat II uses because it keeps the bounds at every iterate) solves (9)
+through
 Drake's MathematicalProgram. Decision variables are θ = log(ξ / ξ0), ξ0 the initial guess, so all
 six are O(1) although ξ spans 16-190; the objective handed to SNOPT is (9a) divided by the number
 of residuals. Uncertainty: the Gauss-Newton cov ξ̂ ≈ s² (Σ Sᵀ w S)⁻¹, s² = J / (n_residuals − 6),
@@ -239,7 +240,7 @@ def result_dict(result: IdentificationResult, true_xi: Hydrodynamics | None = No
         "success": result.success,
         "status": result.status,
         "at_bound": result.at_bound,
-        "method": "000 eq. (9): output-error least squares, RK4 + exact sensitivities, SNOPT",
+        "method": "Roboat II eq. (9): output-error least squares, RK4 + exact sensitivities, SNOPT",
     }
     if true_xi is not None:
         t = true_xi.as_vector()
@@ -318,7 +319,7 @@ def plot_fit(
     est = ", ".join(f"{k} {v:.4g}" for k, v in zip(XI_NAMES, result.xi.as_vector(), strict=True))
     fig.suptitle(
         (f"log {title}\n" if title else "")
-        + f"trial {trial + 1}: output-error fit of 000 eq. (9) — ξ̂ = {est}",
+        + f"trial {trial + 1}: output-error fit of Roboat II eq. (9) — ξ̂ = {est}",
         fontsize=10,
     )
     path = Path(path)

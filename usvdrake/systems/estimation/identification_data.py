@@ -1,6 +1,7 @@
-"""Identification logs: 000 §VI-B's experiment simulated, and the folder format that holds it.
+"""Identification logs: Roboat II §VI-B's experiment simulated, and the folder format that holds it.
 
-000 §VI-B identifies ξ from five trials of about 150 s in which Roboat II was remote-controlled
+Roboat II §VI-B identifies ξ from five trials of about 150 s in which Roboat II was
+remote-controlled
 through sinusoidal motions coupling surge, sway and yaw, with the thrust and the velocity
 recorded at 10 Hz. :func:`simulate_experiment` reproduces that experiment with a known ξ; its
 output, or a real recording, is kept on disk as an *identification log*:
@@ -20,19 +21,19 @@ y left, z up). ``noise_std`` are the measurement standard deviations (u, v [m/s]
 thrust [N]) from which the identification takes its default weight; ``true_xi`` is known only
 for simulated logs.
 
-The simulated experiment (our choices, 000 gives no more detail):
+The simulated experiment (our choices, Roboat II gives no more detail):
 
 * the operator's sticks command a surge force, a sway force and a yaw moment, each a sum of three
   sinusoids (0.01-0.15 Hz, around the vessel's time constants m/d ≈ 1-5 s) with phases and a
   ±15 % frequency jitter drawn per trial; the surge force has a forward offset so the vessel
   makes way (≈ 0.5 m/s) and the Coriolis coupling of eq. (5) is excited;
-* the thrusters receive the minimum-norm allocation f = B⁺ τ_cmd (B of 000 eq. 3 from
+* the thrusters receive the minimum-norm allocation f = B⁺ τ_cmd (B of Roboat II eq. 3 from
   ``configuration_matrix``), clipped to their limits (±50 N for Roboat II, eq. 14), and hold each
   command for one sample (the 10 Hz radio link); thruster dynamics are neglected;
 * the vessel, starting at rest, follows eqs. (1)-(6) with the true ξ, integrated by RK4 at 0.01 s;
-* the log holds the commanded forces plus N(0, 1 N²) (σ_f² = 1 of 000 eq. 16) and the true
+* the log holds the commanded forces plus N(0, 1 N²) (σ_f² = 1 of Roboat II eq. 16) and the true
   velocities plus white noise with σ_u = σ_v = 0.02 m/s (our choice: a GPS/SLAM-derived velocity)
-  and σ_r = 0.01 rad/s (σ_r² = 0.0001 of 000 eq. 16).
+  and σ_r = 0.01 rad/s (σ_r² = 0.0001 of Roboat II eq. 16).
 
 Random numbers come from ``random_streams.generator(seed, stream, trial)``: stream 401 the
 excitation, 402 the velocity noise, 403 the thrust noise.
@@ -95,12 +96,13 @@ class IdentificationLog:
 
 @dataclass
 class ExcitationExperiment:
-    """Settings of the simulated 000 §VI-B experiment (defaults: Roboat II, 000's numbers)."""
+    """Settings of the simulated Roboat II §VI-B experiment (defaults: Roboat II, Roboat II's
+    numbers)."""
 
-    trials: int = 5  # number of trials (000: five)
-    duration_s: float = 150.0  # [s] nominal trial length (000: around 150 s)
+    trials: int = 5  # number of trials (Roboat II: five)
+    duration_s: float = 150.0  # [s] nominal trial length (Roboat II: around 150 s)
     duration_jitter: float = 0.03  # each trial lasts duration_s × U(1 − j, 1 + j)
-    rate_hz: float = 10.0  # [Hz] recording rate (000: 10 Hz)
+    rate_hz: float = 10.0  # [Hz] recording rate (Roboat II: 10 Hz)
     integration_step_s: float = 0.01  # [s] RK4 step of the true motion (divides 1 / rate_hz)
     surge_offset_n: float = 20.0  # [N] mean surge force (makes way at ≈ Xu⁻¹ · 20 N)
     # [N], [N], [N m] amplitudes and [Hz] base frequencies of the three sinusoids per channel
@@ -112,11 +114,12 @@ class ExcitationExperiment:
     yaw_frequencies_hz: list[float] = field(default_factory=lambda: [0.023, 0.059, 0.13])
     frequency_jitter: float = 0.15  # each frequency × U(1 − j, 1 + j) per trial
     velocity_std: tuple[float, float, float] = (0.02, 0.02, 0.01)  # [m/s, m/s, rad/s] u, v, r
-    thrust_std: float = 1.0  # [N] recorded-force noise (000 eq. 16: σ_f² = 1)
+    thrust_std: float = 1.0  # [N] recorded-force noise (Roboat II eq. 16: σ_f² = 1)
 
 
 def fixed_thruster_matrix(vessel: VesselParams, where: str | Path = "vessel") -> np.ndarray:
-    """B (3 × n) with τ = B f for a vessel whose thrusters all have fixed directions (000 eq. 3).
+    """B (3 × n) with τ = B f for a vessel whose thrusters all have fixed directions (Roboat II eq.
+    3).
 
     A log stores one force per thruster, which fixes τ only when no thruster is azimuthing."""
     if any(t.azimuth for t in vessel.thrusters):
@@ -154,7 +157,7 @@ def simulate_experiment(
     experiment: ExcitationExperiment | None = None,
     xi: Hydrodynamics | None = None,
 ) -> IdentificationLog:
-    """The simulated 000 §VI-B data set for ``vessel`` (true ξ: ``xi`` or the vessel file's).
+    """The simulated Roboat II §VI-B data set for ``vessel`` (true ξ: ``xi`` or the vessel file's).
 
     All trials are integrated together as one batch of ``vessel_discrete.rk4`` (eqs. 1-6, still
     water) at ``integration_step_s`` with each command held for one sample period."""

@@ -1,6 +1,6 @@
 """``ImuIntervalMean``: an IMU's samples averaged over an estimator's sample intervals.
 
-A 10 Hz estimator (the NMHE of 000 §IV-C) cannot read a 100 Hz IMU sample by sample; what it
+A 10 Hz estimator (the NMHE of Roboat II §IV-C) cannot read a 100 Hz IMU sample by sample; what it
 needs per interval [t_k, t_{k+1}) is the mean level-frame specific force and yaw rate over it,
 the quantities :func:`usvdrake.systems.estimation.nmhe_model.imu_interval_model` predicts
 from the states at both ends. Averaging also divides the white noise by √(samples).

@@ -1,5 +1,5 @@
 """Configuration, records and measurement models of the NMHE (numerical core of ``Nmhe``):
-``NmheConfig`` holds the estimator's settings (rate, horizon M, the weights RT and PL of 000
+``NmheConfig`` holds the estimator's settings (rate, horizon M, the weights RT and PL of Roboat II
 eqs. (16)-(17), the process-noise, slow-force and IMU terms, bounds and solver), ``NmheSolution``
 and ``NmheWindow`` are what one step returns and what is kept between samples, and the two
 measurement models the QP is linearised with are the thrust map τ(u) with its Jacobian
@@ -19,13 +19,13 @@ POSE_INDEX = [0, 1, 2, 5]  # C of h(q): z = [x y ψ r] picks these entries of q 
 
 @dataclass
 class NmheConfig:
-    rate_hz: float = 10.0  # [Hz] sample and update rate, dt = 1 / rate (000 §VI: 10 Hz)
+    rate_hz: float = 10.0  # [Hz] sample and update rate, dt = 1 / rate (Roboat II §VI: 10 Hz)
     horizon: int = 20  # [samples] window length M (M / rate = 2 s; see the module docstring)
-    # [m², m², rad², (rad/s)²] variances of z = [x y ψ r]: RT⁻¹ of 000 eq. (16), first four
+    # [m², m², rad², (rad/s)²] variances of z = [x y ψ r]: RT⁻¹ of Roboat II eq. (16), first four
     pose_variance: list[float] = field(default_factory=lambda: [0.0005, 0.0005, 0.0005, 0.0001])
     thrust_variance: float = 1.0  # [N²] variance of each measured force: RT⁻¹ of eq. (16), f1..f4
-    angle_variance: float = 0.0175**2  # [rad²] azimuth-angle reading (not in 000: 1° encoder)
-    # [m², m², rad², (m/s)², (m/s)², (rad/s)²] PL⁻¹ of 000 eq. (17), fixed
+    angle_variance: float = 0.0175**2  # [rad²] azimuth-angle reading (not in Roboat II: 1° encoder)
+    # [m², m², rad², (m/s)², (m/s)², (rad/s)²] PL⁻¹ of Roboat II eq. (17), fixed
     arrival_variance: list[float] = field(default_factory=lambda: [1.0, 1.0, 1.0, 0.1, 0.1, 1.0])
     # [N, N, N m] 1σ of the white unmodelled body force d_k per sample (w_k of eq. 15b; ours)
     disturbance_std: list[float] = field(default_factory=lambda: [2.0, 2.0, 0.5])

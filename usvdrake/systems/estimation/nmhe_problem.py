@@ -1,4 +1,4 @@
-"""The NMHE of 000 §IV-C, eqs. (15)-(17), as one Gauss-Newton QP per sample (numerical core of
+"""The NMHE of Roboat II §IV-C, eqs. (15)-(17), as one Gauss-Newton QP per sample (numerical core of
 ``Nmhe``).
 
 **Window.** M samples at t_0 < … < t_{M−1} = t_j (newest last), dt apart. Sample k carries the
@@ -66,7 +66,8 @@ estimates to 1e-10 (pose and thrust only; with the IMU terms river_tracking meas
 interior-point method's accuracy does not depend on the conditioning (the weights here span 0.1 to
 10⁴) and needs no iteration limit.
 
-**IMU** (not in 000, whose z is pose and thrust only; used when an IMU feeds the window). Waves
+**IMU** (not in Roboat II, whose z is pose and thrust only; used when an IMU feeds the window).
+Waves
 move a small boat at 0.3-1 Hz by a few cm/s but only ~1 cm, under the pose noise (σ = 2.2 cm):
 no estimator on poses alone can see that motion (river_tracking: u, v RMSE 0.041 m/s on poses,
 0.009 / 0.012 with the IMU). The IMU's readings, averaged over each interval (``ImuIntervalMean``,

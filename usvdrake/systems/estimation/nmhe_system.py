@@ -1,4 +1,4 @@
-"""``Nmhe``: the moving-horizon estimator of 000 §IV-C (eqs. 15-17) as a 10 Hz LeafSystem."""
+"""``Nmhe``: the moving-horizon estimator of Roboat II §IV-C (eqs. 15-17) as a 10 Hz LeafSystem."""
 
 import time
 

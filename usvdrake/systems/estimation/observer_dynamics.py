@@ -1,4 +1,4 @@
-"""Nonlinear passive observer of 003's motion controller (Fossen & Strand 1999; Fossen 2011
+"""Nonlinear passive observer of Ueland 2017's motion controller (Fossen & Strand 1999; Fossen 2011
 §11.4.1).
 
 Model (Fossen 2011 §11.4.1, low-speed / dynamic-positioning form, Coriolis neglected):
@@ -30,7 +30,7 @@ which turn the position loop into the notch/low-pass filter
 diagonal with the passivity ordering 1/T_i ≪ K3_i/K4_i < ω_oi < ω_ci. Equation numbers are not
 quoted: we could not check them against the printed book.
 
-``wave_filter=False`` (the default, for 003's calm basin water) drops ξ, K1 and A_w: ŷ = η̂,
+``wave_filter=False`` (the default, for Ueland 2017's calm basin water) drops ξ, K1 and A_w: ŷ = η̂,
 the remaining 9 states are [η̂, b̂, ν̂] and the ordering becomes 1/T_i ≪ K3_i/K4_i < ω_ci.
 
 Our choice of K3, K4 (``fossen_gains``; the book leaves them free within the ordering): with

@@ -1,4 +1,4 @@
-"""The output-error model of the grey-box identification (000 §IV-A, eq. 9a; the method is
+"""The output-error model of the grey-box identification (Roboat II §IV-A, eq. 9a; the method is
 described in ``identification``): ξ as a 6-vector, ν̇ of eq. (2) without current and its
 Jacobians in ν and ξ, one RK4 step of ν with its exact step Jacobians, the trials of a log as
 padded batches (``OutputErrorData``), their batched simulation from each trial's first measured ν
@@ -141,7 +141,7 @@ class OutputErrorData:
 
     @classmethod
     def from_trials(cls, trials: list[Trial], b: np.ndarray) -> OutputErrorData:
-        """Stack trials (each ≥ 2 samples) with τ = B f; B (3 × n) of 000 eq. (3)."""
+        """Stack trials (each ≥ 2 samples) with τ = B f; B (3 × n) of Roboat II eq. (3)."""
         if not trials:
             raise ConfigError("identification", "trials", "at least one trial", "none")
         n_t = max(len(tr.t) for tr in trials)

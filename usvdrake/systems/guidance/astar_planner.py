@@ -1,4 +1,4 @@
-"""``AStarPlanner``: 003's weighted multi-goal A* on the processed map, as a LeafSystem."""
+"""``AStarPlanner``: Ueland 2017's weighted multi-goal A* on the processed map, as a LeafSystem."""
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -25,9 +25,10 @@ class AStarPlanner(LeafSystem):
         - path
         - destination
 
-    ``path``: the first 128 cell centres [m] (n × 2) of the path (003 hands 128 points to the
+    ``path``: the first 128 cell centres [m] (n × 2) of the path (Ueland 2017 hands 128 points to
+    the
     setpoint law per cycle), empty with no goal or no path; ``destination`` = [x, y, valid,
-    cost] of the chosen goal (cost [m] weighted by 003 eq. 1). Goal hysteresis: the previous
+    cost] of the chosen goal (cost [m] weighted by Ueland 2017 eq. 1). Goal hysteresis: the previous
     destination is kept while it is still a goal and no other is cheaper by more than
     ``replan_margin`` (a fraction), so two nearly equal frontiers do not make the vessel dither
     between them as the map grows.

@@ -1,4 +1,5 @@
-"""``Coordinator``: the fleet's dispatcher (000 §III) — requests in, one ride per free boat out."""
+"""``Coordinator``: the fleet's dispatcher (Roboat II §III) — requests in, one ride per free boat
+out."""
 
 import numpy as np
 from pydrake.common.value import AbstractValue

@@ -1,7 +1,7 @@
-"""Who takes which ride: the coordinator's numerical core (000 §III).
+"""Who takes which ride: the coordinator's numerical core (Roboat II §III).
 
 Roboat's service: "a passenger asks for a ride at a position, the system coordinator gives the
-task to the closest unoccupied boat" (000 §III). Closest is measured as a boat must travel it:
+task to the closest unoccupied boat" (Roboat II §III). Closest is measured as a boat must travel it:
 the length of the shortest collision-free path on the planning grid, not the straight line
 (across a canal ring those differ by hundreds of metres).
 

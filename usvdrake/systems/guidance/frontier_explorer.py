@@ -1,15 +1,15 @@
-"""``FrontierExplorer``: 003's exploration strategy (Yamauchi 1997) over a SLAM map.
+"""``FrontierExplorer``: Ueland 2017's exploration strategy (Yamauchi 1997) over a SLAM map.
 
-Every planning period (003: the planner "only updates the chosen path every few seconds") it
+Every planning period (Ueland 2017: the planner "only updates the chosen path every few seconds") it
 processes the map (:func:`process_map`: inflation, near-vessel cells free, reachability),
 finds the frontier cells (traversable cells next to unexplored ones, small clusters dropped)
 and hands them as goals to the :class:`~usvdrake.systems.guidance.astar_planner.AStarPlanner`,
-whose multi-goal A* picks the cheapest (003 §Exploration Strategy steps 1-3). Frontier cells
+whose multi-goal A* picks the cheapest (Ueland 2017 §Exploration Strategy steps 1-3). Frontier cells
 within ``visited_radius`` of the vessel's track are dropped: the vessel has been there and the
 lidar still cannot see them (water under a low plank, a corner behind a board), so they are
 not worth another trip. When no frontier is left the exploration is finished (latched).
 
-The operator (003 §Operator Interaction) switches modes through ``operator_command``: in
+The operator (Ueland 2017 §Operator Interaction) switches modes through ``operator_command``: in
 ``goto`` the goal is the reachable cell nearest the operator's location, in ``stop`` there is
 none (the setpoint law then holds position).
 """
@@ -37,12 +37,14 @@ NO_GOALS = np.zeros((0, 2), dtype=int)
 @dataclass
 class ExplorerConfig:
     resolution: float = 0.2  # [m] planning grid (the SLAM map is coarsened to it)
-    inflation: float = 0.4  # [m] 003 §Map Processing
+    inflation: float = 0.4  # [m] Ueland 2017 §Map Processing
     near_free_radius: float = 0.6  # [m] unknown cells this close to the vessel count as free
     planning_period: float = 2.0  # [s] map processing + frontiers + A* every this often
     min_frontier_cells: int = 3  # [cells] smaller frontier clusters are ignored
     visited_radius: float = 0.5  # [m] frontier cells this close to the track are dropped
-    connection_distance: int = 4  # 003: 1-4 (8/16/32/48 directions); 4 in 003's experiments
+    connection_distance: int = (
+        4  # Ueland 2017: 1-4 (8/16/32/48 directions); 4 in Ueland 2017's experiments
+    )
     replan_margin: float = 0.2  # [-] keep the current frontier unless another is this much cheaper
     start_delay: float = 1.0  # [s] first planning cycle (the SLAM needs a few scans)
 

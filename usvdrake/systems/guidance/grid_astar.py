@@ -1,7 +1,7 @@
-"""Grid A* on a world's occupancy: the "simple A* planner" of Roboat II (000 §III, §VI-B).
+"""Grid A* on a world's occupancy: the "simple A* planner" of Roboat II (§III, §VI-B).
 
 Roboat II plans its reference paths with a simple A* planner and tracks them with the NMPC
-(000 §III); goals are given one after another (000 §VI-B). This module is that planner:
+(Roboat II §III); goals are given one after another (Roboat II §VI-B). This module is that planner:
 
 1. :class:`PlanningGrid` takes the ground-truth occupancy (:meth:`World.occupancy`) and its
    Euclidean distance transform (``scipy.ndimage``), giving every cell's clearance [m] to the
@@ -36,8 +36,8 @@ SQRT2 = math.sqrt(2.0)
 # noise (~1e-13), which would otherwise decide between equal-f nodes instead of the h
 # tie-break, and A* would expand every cell of the parallelogram of equally short paths.
 TIE_QUANTUM = float(2**24)  # [1/cell]
-# Roboat II (000 Table I, 2.0 m × 1.0 m): circumscribed radius √(1.0² + 0.5²) = 1.12 m, plus
-# 0.5 m margin for tracking error (000 §VI-B reports 0.096 m position RMSE) and quay fenders.
+# Roboat II (Table I, 2.0 m × 1.0 m): circumscribed radius √(1.0² + 0.5²) = 1.12 m, plus
+# 0.5 m margin for tracking error (Roboat II §VI-B reports 0.096 m position RMSE) and quay fenders.
 DEFAULT_INFLATION = 1.6  # [m]
 
 

@@ -24,7 +24,7 @@ class MissionConfig:
 
 @dataclass
 class ControlConfig:
-    rate_hz: float = 10.0  # [Hz] guidance + controller rate, zero-order hold (000 §VI: 10 Hz)
+    rate_hz: float = 10.0  # [Hz] guidance + controller rate, zero-order hold (Roboat II §VI: 10 Hz)
     lookahead: float = 4.0  # [m] line-of-sight look-ahead distance Δ (Fossen 2011 §10.3.2)
     heading_natural_frequency: float = 0.8  # [rad/s] closed-loop heading bandwidth ω_ψ
     heading_damping: float = 1.0  # [-] closed-loop heading damping ζ_ψ

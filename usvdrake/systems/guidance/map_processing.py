@@ -1,15 +1,18 @@
-"""Map processing and cost weighting for exploration (003 §Map Processing, §Path Planner eq. 1).
+"""Map processing and cost weighting for exploration (Ueland 2017 §Map Processing, §Path Planner eq.
+1).
 
-003 imports Hector SLAM's occupancy grid, reads each cell as occupied, free or unexplored and
-prepares it for its planner in four steps (003 Fig. 10 a-d), all here:
+Ueland 2017 imports Hector SLAM's occupancy grid, reads each cell as occupied, free or unexplored
+and
+prepares it for its planner in four steps (Ueland 2017 Fig. 10 a-d), all here:
 
 1. **Coarsening** (:func:`coarsen`): the SLAM map (5 cm for the scan matcher) is reduced to the
-   planning resolution (003 plans on a coarser grid): a planning cell is occupied when any of
+   planning resolution (Ueland 2017 plans on a coarser grid): a planning cell is occupied when any
+   of
    its fine cells is, free when at least ``free_fraction`` of them are seen free, else unknown.
 2. **Unknown cells near the vessel are free**: the lidar never sees the water under the hull
    (the RPLIDAR's minimum range is 0.15 m), so cells within ``near_free_radius`` of the vessel
    that the map does not know are taken as free.
-3. **Inflation** by ``inflation`` (003: 0.4 m): every cell whose centre lies within that
+3. **Inflation** by ``inflation`` (Ueland 2017: 0.4 m): every cell whose centre lies within that
    distance of an occupied cell is inaccessible, so the vessel can be planned for as a point.
    Distances come from one Euclidean distance transform (``scipy.ndimage``), not a search per
    cell. An occupied cell says only that something lies somewhere in its square, so the
@@ -18,8 +21,10 @@ prepares it for its planner in four steps (003 Fig. 10 a-d), all here:
    inequality), so inflating by it is safe.
 4. **Reachability**: free cells not 8-connected to the vessel's cell are dropped.
 
-The weight of each remaining cell is 003 eq. (1), w = 1 + 5 / (0.1 + d_obj), with d_obj [m] the
-distance from the cell's centre to the closest occupied cell's centre (003's definition), from
+The weight of each remaining cell is Ueland 2017 eq. (1), w = 1 + 5 / (0.1 + d_obj), with d_obj [m]
+the
+distance from the cell's centre to the closest occupied cell's centre (Ueland 2017's definition),
+from
 the same transform; the planner integrates w along its path, so it prefers to
 keep away from objects.
 """
@@ -32,13 +37,14 @@ from scipy import ndimage
 from usvdrake.worlds.world import OccupancyGrid
 
 EIGHT = np.ones((3, 3), dtype=bool)  # 8-connectivity for labelling and dilation
-DEFAULT_INFLATION = 0.4  # [m] 003 §Map Processing: "the inflation distance is set to 0.4 m"
-WEIGHT_GAIN = 5.0  # [m] 003 eq. (1): w = 1 + 5 / (0.1 + d_obj)
-WEIGHT_OFFSET = 0.1  # [m] 003 eq. (1)
+DEFAULT_INFLATION = 0.4  # [m] Ueland 2017 §Map Processing: "the inflation distance is set to 0.4 m"
+WEIGHT_GAIN = 5.0  # [m] Ueland 2017 eq. (1): w = 1 + 5 / (0.1 + d_obj)
+WEIGHT_OFFSET = 0.1  # [m] Ueland 2017 eq. (1)
 
 
 def cost_weight(d_obj: np.ndarray, gain: float = WEIGHT_GAIN, offset: float = WEIGHT_OFFSET):
-    """003 eq. (1): the cost of crossing a cell whose centre is ``d_obj`` [m] from the nearest
+    """Ueland 2017 eq. (1): the cost of crossing a cell whose centre is ``d_obj`` [m] from the
+    nearest
     occupied cell, w = 1 + gain / (offset + d_obj); w → 1 far from everything."""
     return 1.0 + gain / (offset + np.asarray(d_obj, dtype=float))
 
@@ -76,7 +82,7 @@ class PlanningMap:
     Arrays are (rows = y, cols = x) like :class:`OccupancyGrid`; ``traversable`` = free,
     outside the inflation and reachable from ``start``; ``unknown`` = not seen by the map (after
     the near-vessel rule); ``clearance`` [m] a lower bound on the distance to anything in an
-    occupied cell (inf with no occupied cell); ``weights`` 003 eq. (1) on it.
+    occupied cell (inf with no occupied cell); ``weights`` Ueland 2017 eq. (1) on it.
     """
 
     origin: tuple[float, float]
@@ -127,7 +133,7 @@ def process_map(
     near_free_radius: float = 0.6,
     max_snap: float = 1.0,
 ) -> PlanningMap:
-    """003 §Map Processing on ``grid`` (steps 2-4 of the module docstring) for a vessel at
+    """Ueland 2017 §Map Processing on ``grid`` (steps 2-4 of the module docstring) for a vessel at
     ``vessel_xy`` [m]. When the vessel's own cell is not traversable (it drifted into the
     inflation) the start is the nearest traversable cell within ``max_snap`` [m];
     :class:`VesselOffMapError` if there is none or the vessel is off the map."""
@@ -160,7 +166,7 @@ def process_map(
         edt = ndimage.distance_transform_edt(~occupied)
         clearance = np.maximum(edt * res - res / np.sqrt(2.0), 0.0)
         clearance[occupied] = 0.0
-        d_obj = edt * res  # 003 eq. (1): centre to the closest occupied cell's centre
+        d_obj = edt * res  # Ueland 2017 eq. (1): centre to the closest occupied cell's centre
     else:
         clearance = d_obj = np.full(data.shape, np.inf)
     open_cells = free & (clearance > inflation)
@@ -186,7 +192,8 @@ def process_map(
 
 
 def frontier_cells(pmap: PlanningMap, min_cluster: int = 3) -> np.ndarray:
-    """Frontier cells (003 §Exploration Strategy step 1; Yamauchi 1997): traversable cells with
+    """Frontier cells (Ueland 2017 §Exploration Strategy step 1; Yamauchi 1997): traversable cells
+    with
     an unknown 8-neighbour, as an (n, 2) (row, col) array. Frontiers are grouped 8-connected
     and groups smaller than ``min_cluster`` cells are dropped: a gap of a cell or two between
     seen cells is lidar sparsity, not unexplored space worth a trip."""

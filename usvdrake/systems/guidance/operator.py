@@ -1,6 +1,7 @@
-"""Operator commands (003 §Operator Interaction): explore, go to a location, stop.
+"""Operator commands (Ueland 2017 §Operator Interaction): explore, go to a location, stop.
 
-003's operator window lets the user "toggle between automatic exploration and navigation to a
+Ueland 2017's operator window lets the user "toggle between automatic exploration and navigation to
+a
 known location on the map"; we add stop. A command travels as a 3-vector
 [mode, goal_x, goal_y] (``operator_command`` ports), the mode one of :class:`OperatorMode`.
 """
@@ -14,7 +15,7 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 
 
 class OperatorMode(enum.IntEnum):
-    EXPLORE = 0  # frontier exploration (003 §Exploration Strategy)
+    EXPLORE = 0  # frontier exploration (Ueland 2017 §Exploration Strategy)
     GOTO = 1  # single-goal A* to the operator's location
     STOP = 2  # hold the current position
 
@@ -51,7 +52,8 @@ GOAL_SLIDERS = ("Goal x [m]", "Goal y [m]")
 
 
 class OperatorPanel(LeafSystem):
-    """003's operator controls as a LeafSystem: Meshcat buttons (Explore / Go to goal / Stop,
+    """Ueland 2017's operator controls as a LeafSystem: Meshcat buttons (Explore / Go to goal /
+    Stop,
     keys E / G / S) and two goal sliders, and/or a script of timed commands.
 
     .. pydrake_system::

@@ -1,6 +1,6 @@
-"""A timed reference trajectory for the NMPC from a planned path (000 §III, §VI-B).
+"""A timed reference trajectory for the NMPC from a planned path (Roboat II §III, §VI-B).
 
-Roboat II's NMPC tracks references from an A* planner at u = 0.6 m/s surge and v = 0 (000
+Roboat II's NMPC tracks references from an A* planner at u = 0.6 m/s surge and v = 0 (Roboat II
 §VI-B); goals are given one after another and the vessel "approaches the current goal position
 and heads to the next goal by fast turning itself". :class:`ReferenceTrajectory` turns the
 planner's straight legs (:mod:`grid_astar`) into that reference:
@@ -21,7 +21,8 @@ planner's straight legs (:mod:`grid_astar`) into that reference:
   ν̇_ref = [u̇ 0 ṙ] with ṙ = κ u̇ (r steps by ±u/R where an arc meets a straight leg; the
   impulse of ṙ there is not represented).
 
-Defaults: a_max = 0.1 m/s² takes m11 a_max = 17 N of Roboat II's 100 N surge thrust (000 eq. 14,
+Defaults: a_max = 0.1 m/s² takes m11 a_max = 17 N of Roboat II's 100 N surge thrust (Roboat II eq.
+14,
 m11 = 172 kg), leaving most for feedback and 0.6 m/s is reached in 9.4 s over 2.8 m;
 r_max = 0.25 rad/s keeps a margin under the |r| ≤ 0.3 rad/s we allow Roboat II at 0.6 m/s
 (R = 2.4 m; holding v = 0 on the arc takes m11 u r = 26 N of sway thrust);
@@ -288,7 +289,8 @@ class ReferenceTrajectory:
 
     ``legs``: polylines (n_k × 2) [m], each ending at a goal and starting where the previous
     ended; the vessel comes to rest at each goal, turns in place to the next leg and goes on
-    (000 §VI-B). ``speed`` [m/s] cruise surge speed; ``accel`` [m/s²] peak surge acceleration of
+    (Roboat II §VI-B). ``speed`` [m/s] cruise surge speed; ``accel`` [m/s²] peak surge acceleration
+    of
     the start and stop ramps; ``yaw_rate`` [rad/s] largest |r| (sets the corner radius
     speed / yaw_rate); ``yaw_accel`` [rad/s²] peak |ṙ| of turns in place; ``grid`` the planning
     grid, to keep corner arcs at its inflation clearance (None: arcs are not checked);

@@ -1,4 +1,4 @@
-"""``TaxiPilot``: one Roboat's side of the ride service (000 §III) — plan to the pickup, wait
+"""``TaxiPilot``: one Roboat's side of the ride service (Roboat II §III) — plan to the pickup, wait
 while the passenger boards, plan to the destination, and keep clear of the other boats."""
 
 import math
@@ -29,7 +29,7 @@ SEE_DELAY = 1e-3  # [s] after the lidar's sweep event
 
 @dataclass
 class TaxiConfig:
-    """How a taxi drives (one per fleet; 000 §III, §VI-B)."""
+    """How a taxi drives (one per fleet; Roboat II §III, §VI-B)."""
 
     speed: float = 1.2  # [m/s] cruise surge speed (Amsterdam's canal limit is 6 km/h)
     acceptance_radius: float = 1.5  # [m] at a pickup or destination

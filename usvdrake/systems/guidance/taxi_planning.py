@@ -1,6 +1,6 @@
 """Seeing the other boats and planning around them: the taxi pilot's numerical core.
 
-Roboat II plans its paths with A* on a map and tracks them with its NMPC (000 §III); the map
+Roboat II plans its paths with A* on a map and tracks them with its NMPC (Roboat II §III); the map
 knows the quays, bridges and moored boats but not the other taxis, which the vessel only sees
 through its lidar. This module turns a sweep into the other vessels and the A* grid into one
 that keeps clear of them:

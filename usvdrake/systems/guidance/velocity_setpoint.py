@@ -1,6 +1,6 @@
-"""The velocity-setpoint law of 003 (§Velocity Control Law, eqs. 2-4) and its LeafSystem.
+"""The velocity-setpoint law of Ueland 2017 (§Velocity Control Law, eqs. 2-4) and its LeafSystem.
 
-003 does not command a speed: it moves the position setpoint of the motion controller along
+Ueland 2017 does not command a speed: it moves the position setpoint of the motion controller along
 the planned path, farther ahead in open water and closer in narrow places, and the reference
 model and PD controller turn the distance into speed. Per cycle:
 
@@ -17,12 +17,13 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 
 from usvdrake.sensors.messages import LaserScan
 
-R_Q = 0.01  # [m] 003: re-discretisation step of the path
-PATH_POINTS = 128  # 003: "the first 128 discrete positions in the planned path"
+R_Q = 0.01  # [m] Ueland 2017: re-discretisation step of the path
+PATH_POINTS = 128  # Ueland 2017: "the first 128 discrete positions in the planned path"
 
 
 def lookahead_distance(d_min: float) -> float:
-    """003 eq. (2): the look-ahead r_s [m] for the nearest object at ``d_min`` [m]. Continuous
+    """Ueland 2017 eq. (2): the look-ahead r_s [m] for the nearest object at ``d_min`` [m].
+    Continuous
     at 1 m and 2.1 m; at 0.3 m it steps from 0.1 to 0.1 (d_min − 0.2 = 0.1): continuous too."""
     d = float(d_min)
     if np.isnan(d):
@@ -37,7 +38,7 @@ def lookahead_distance(d_min: float) -> float:
 
 
 def rediscretise(path: np.ndarray, step: float = R_Q) -> np.ndarray:
-    """003 step 1: points every ``step`` [m] along the polyline ``path`` (n × 2), first and
+    """Ueland 2017 step 1: points every ``step`` [m] along the polyline ``path`` (n × 2), first and
     last point included (the last gap may be shorter)."""
     path = np.asarray(path, dtype=float).reshape(-1, 2)
     if len(path) < 2:
@@ -53,7 +54,8 @@ def rediscretise(path: np.ndarray, step: float = R_Q) -> np.ndarray:
 def setpoint_on_path(
     dense: np.ndarray, position, d_min: float, step: float = R_Q
 ) -> tuple[np.ndarray, int, int]:
-    """003 steps 2-4 on a re-discretised path ``dense`` (N × 2): the setpoint p_s, the closest
+    """Ueland 2017 steps 2-4 on a re-discretised path ``dense`` (N × 2): the setpoint p_s, the
+    closest
     index l and the setpoint index s = min(l + n, N) (0-based here: min(l + n, N − 1))."""
     p = np.asarray(position, dtype=float)[:2]
     closest = int(np.argmin(((dense - p) ** 2).sum(axis=1)))
@@ -70,7 +72,8 @@ def nearest_return(scan: LaserScan) -> float:
 
 
 class VelocitySetpointLaw(LeafSystem):
-    """003's velocity-setpoint law at ``rate_hz`` (003 runs it faster than the planner).
+    """Ueland 2017's velocity-setpoint law at ``rate_hz`` (Ueland 2017 runs it faster than the
+    planner).
 
     .. pydrake_system::
 
@@ -85,10 +88,11 @@ class VelocitySetpointLaw(LeafSystem):
 
     ``path`` (abstract (n × 2) [m] array; only the first 128 points are used); ``setpoint`` =
     [x_s, y_s, ψ_s] for the reference model, ψ_s the fixed ``heading`` (the round vessel does not
-    steer: 003 §Experimental Platform); ``lookahead`` = [r_s, d_min, distance from the vessel to
+    steer: Ueland 2017 §Experimental Platform); ``lookahead`` = [r_s, d_min, distance from the
+    vessel to
     the path's closest point (a cross-track error)]. With an empty path the
     setpoint holds where the vessel was when the path emptied (stop, or exploration finished).
-    d_min is measured from the lidar, taken to sit at the vessel's centre (003's RPLIDAR is
+    d_min is measured from the lidar, taken to sit at the vessel's centre (Ueland 2017's RPLIDAR is
     on the centre of the lid).
     """
 
@@ -144,7 +148,7 @@ class VelocitySetpointLaw(LeafSystem):
 
 class ExplorationReport(LeafSystem):
     """The exploration loop's ``reference`` in the form the mission metrics and report read
-    for every controller: [ψ_d, speed of the reference model |η̇_d| (the speed 003's law asks
+    for every controller: [ψ_d, speed of the reference model |η̇_d| (the speed Ueland 2017's law asks
     for), distance to the planned path].
 
     .. pydrake_system::

@@ -1,17 +1,19 @@
-"""Weighted multi-goal A* with long connections: the path planner of 003 §Path Planner.
+"""Weighted multi-goal A* with long connections: the path planner of Ueland 2017 §Path Planner.
 
-The exploration planner of 003 ("Marine autonomous exploration using a lidar and SLAM") is A*
+The exploration planner of Ueland 2017 ("Marine autonomous exploration using a lidar and SLAM") is
+A*
 (Hart, Nilsson & Raphael 1968) on an occupancy grid with one node per cell centre, extended in
-three ways (003 §Path Planner):
+three ways (Ueland 2017 §Path Planner):
 
-1. **Connection distance** d ∈ {1, 2, 3, 4} (003 Fig. 7): a node connects to the nodes up to d
+1. **Connection distance** d ∈ {1, 2, 3, 4} (Ueland 2017 Fig. 7): a node connects to the nodes up to
+d
    cells away in either direction, one edge per heading, i.e. the offsets (Δr, Δc) with
    max(|Δr|, |Δc|) ≤ d and gcd(|Δr|, |Δc|) = 1 (:func:`connection_offsets`): 8, 16, 32 and
-   48 headings. Longer connections give shorter, smoother paths (003 Fig. 8).
+   48 headings. Longer connections give shorter, smoother paths (Ueland 2017 Fig. 8).
 2. **Multiple goals** (the frontier cells of the exploration): the heuristic is the distance to
    the *nearest* goal, so the first goal taken off the open list is the cheapest to reach and
    the path is retraced from it.
-3. **Cost weighting**: every cell has a weight w(s) ≥ 1, in 003 eq. (1)
+3. **Cost weighting**: every cell has a weight w(s) ≥ 1, in Ueland 2017 eq. (1)
    w = 1 + 5 / (0.1 + d_obj) with d_obj the distance to the nearest obstacle; the weights are
    the caller's (this module takes them as an array), so the vessel keeps off obstacles.
 
@@ -61,14 +63,16 @@ MAX_CONNECTION_DISTANCE = 4
 def _check_distance(distance) -> int:
     ok = isinstance(distance, int | np.integer) and not isinstance(distance, bool)
     if not ok or not 1 <= distance <= MAX_CONNECTION_DISTANCE:
-        raise ValueError(f"connection distance must be 1, 2, 3 or 4 (003 Fig. 7), got {distance!r}")
+        raise ValueError(
+            f"connection distance must be 1, 2, 3 or 4 (Ueland 2017 Fig. 7), got {distance!r}"
+        )
     return int(distance)
 
 
 def connection_offsets(distance: int) -> np.ndarray:
     """The (Δr, Δc) neighbour offsets (K, 2) of connection distance ``distance`` ∈ {1..4}:
     max(|Δr|, |Δc|) ≤ d and gcd(|Δr|, |Δc|) = 1, one per heading; K = 8, 16, 32, 48
-    (003 Fig. 7). Sorted by heading angle atan2(Δr, Δc), from −π."""
+    (Ueland 2017 Fig. 7). Sorted by heading angle atan2(Δr, Δc), from −π."""
     d = _check_distance(distance)
     out = [
         (dr, dc)
@@ -377,10 +381,11 @@ def weighted_astar(
     goals,
     connection_distance: int = 4,
 ) -> AStarResult | None:
-    """Cheapest path from ``start`` to the cheapest of ``goals`` (003 §Path Planner, eq. (1)).
+    """Cheapest path from ``start`` to the cheapest of ``goals`` (Ueland 2017 §Path Planner, eq.
+    (1)).
 
     ``traversable``: bool (rows, cols), True where the vessel may be (an inflated map).
-    ``weights``: float (rows, cols), w(s) ≥ 1 on every traversable cell (003 eq. (1); other
+    ``weights``: float (rows, cols), w(s) ≥ 1 on every traversable cell (Ueland 2017 eq. (1); other
     cells are not read). ``start``: (row, col). ``goals``: (K, 2) int (row, col), or one
     (row, col); goals on non-traversable cells are ignored. ``connection_distance`` ∈ {1..4}:
     8, 16, 32 or 48 headings (:func:`connection_offsets`).

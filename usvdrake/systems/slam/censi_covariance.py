@@ -1,34 +1,35 @@
-"""Closed-form covariance of a converged PLICP match (002 §II-B, eqs. 4-10).
+"""Closed-form covariance of a converged PLICP match (Pham et al. §II-B, eqs. 4-10).
 
 Censi, "An accurate closed-form estimate of ICP's covariance", ICRA 2007: if x̂ minimises
 J(x, z) for measurements z, then to first order
 
     cov(x̂) ≈ (∂²J/∂x²)⁻¹ (∂²J/∂x∂z) cov(z) (∂²J/∂x∂z)ᵀ (∂²J/∂x²)⁻¹.
 
-002 eq. 4 as extracted ends in (∂²J/∂z²)⁻¹; that is garbled (the dimensions do not even
+Pham et al. eq. 4 as extracted ends in (∂²J/∂z²)⁻¹; that is garbled (the dimensions do not even
 match): both outer factors are the inverse Hessian in x, as in Censi 2007 eq. 5.
 
 Here x = [t_x, t_y, θ] and J is the point-to-line cost at the match's final correspondences
-(002 eq. 5), J = Σ_i r_i², r_i = n_iᵀ (R(θ) p_i + t − a_i), with every point written in polar
+(Pham et al. eq. 5), J = Σ_i r_i², r_i = n_iᵀ (R(θ) p_i + t − a_i), with every point written in
+polar
 form p = ρ u (u the known beam direction): p_i = ρ_i u_i from the current scan, a_i = ρ_a u_a
 and b_i = ρ_b u_b its two reference points, n_i ⊥ (b_i − a_i). The measurements z are the
 *ranges*, cov(z) = σ² I (σ the range noise).
 
-Differences from 002 eqs. 6-10, and why:
+Differences from Pham et al. eqs. 6-10, and why:
 
 * z holds each scan's ranges once (all current ranges, then all reference ranges) and the
-  contributions of every correspondence that uses a range are summed into its column. 002
+  contributions of every correspondence that uses a range are summed into its column. Pham et al.
   eq. 6 stacks (ρ_i, ρ_a, ρ_b) per correspondence, which counts a reference range used by
   several current points as independent measurements and underestimates the covariance.
-* ∂²J/∂x∂z is analytic (002 eq. 9 takes ∂C_i/∂ρ by a forward difference with ε = 0.001).
+* ∂²J/∂x∂z is analytic (Pham et al. eq. 9 takes ∂C_i/∂ρ by a forward difference with ε = 0.001).
   With d = b − a, τ = d/|d|: ∂n/∂d = −τ nᵀ/|d|, so ∂n/∂ρ_a = τ (n·u_a)/|d| and
-  ∂n/∂ρ_b = −τ (n·u_b)/|d|. Then, with v = R p + t − a (002's v₂), R' = dR/dθ:
+  ∂n/∂ρ_b = −τ (n·u_b)/|d|. Then, with v = R p + t − a (Pham et al.'s v₂), R' = dR/dθ:
 
       ∂r/∂t = n,  ∂r/∂θ = nᵀ R' p,
       ∂r/∂ρ_i = nᵀ R u_i,  ∂r/∂ρ_a = (∂n/∂ρ_a)ᵀ v − nᵀ u_a,  ∂r/∂ρ_b = (∂n/∂ρ_b)ᵀ v,
       ∂²r/∂t∂ρ = ∂n/∂ρ,  ∂²r/∂θ∂ρ_i = nᵀ R' u_i,  ∂²r/∂θ∂ρ_{a,b} = (∂n/∂ρ_{a,b})ᵀ R' p,
       ∂²J/∂x∂z = Σ 2 (∂r/∂x)(∂r/∂z)ᵀ + 2 r ∂²r/∂x∂z,
-      ∂²J/∂x² = Σ 2 (∂r/∂x)(∂r/∂x)ᵀ + 2 r ∂²r/∂x²,  ∂²r/∂θ² = −nᵀ R p   (002 eq. 7).
+      ∂²J/∂x² = Σ 2 (∂r/∂x)(∂r/∂x)ᵀ + 2 r ∂²r/∂x²,  ∂²r/∂θ² = −nᵀ R p   (Pham et al. eq. 7).
 
 The correspondences are held fixed, as in Censi 2007. Measured (tests/test_plicp.py): against
 Monte Carlo with fixed correspondences, σ = 1 mm, the estimate agrees to ~15 % (Frobenius).
@@ -108,7 +109,8 @@ def plicp_covariance(
 ) -> np.ndarray:
     """Covariance (3 × 3, [m², m·rad, rad²]) of ``result`` = (t_x, t_y, θ) from
     :func:`usvdrake.systems.slam.plicp.plicp` when every range has independent noise of
-    standard deviation ``sigma`` [m] (Censi 2007 eq. 5 / 002 eq. 4, see the module docstring)."""
+    standard deviation ``sigma`` [m] (Censi 2007 eq. 5 / Pham et al. eq. 4, see the module
+    docstring)."""
     hess, jxz = plicp_hessians(reference, current, result.t, result.theta, result.correspondences)
     h_inv = np.linalg.inv(hess)
     cov = sigma**2 * h_inv @ (jxz @ jxz.T) @ h_inv

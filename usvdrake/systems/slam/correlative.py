@@ -438,7 +438,7 @@ def match_covariance(
     grid's cell the weights sit in one cell and the variance is about 0 (a caller adds its
     floor). Where the scene leaves a direction free (a corridor's length), the weights stay
     flat along it and the variance grows to the span's uniform one, where Censi's closed form
-    (002 eqs. 4-10) trusts the few far points and stays centimetre-small."""
+    (Pham et al. eqs. 4-10) trusts the few far points and stays centimetre-small."""
     pts = _evenly(current, max_points, "match_covariance")
     res = field.resolution
     n = int(np.floor(linear_span / res))

@@ -1,16 +1,16 @@
-"""Factor-graph back end of Roboat II's lidar-IMU-GPS SLAM on iSAM2 (000 §V), numerical core.
+"""Factor-graph back end of Roboat II's lidar-IMU-GPS SLAM on iSAM2 (Roboat II §V), numerical core.
 
 The graph has one variable type, the keyframe pose X(k) ∈ SE(3) (gtsam ``Pose3``, world = the
 local ENU frame of :class:`usvdrake.sensors.geodesy.LocalFrame`), and these factors
-(000 §V, Fig. 6), after LIO-SAM (Shan et al., IROS 2020, 000 ref. [22]):
+(Roboat II §V, Fig. 6), after LIO-SAM (Shan et al., IROS 2020, Roboat II ref. [22]):
 
-* **Keyframes** (000 §V-A): a lidar frame becomes a keyframe when the vessel has moved more
+* **Keyframes** (Roboat II §V-A): a lidar frame becomes a keyframe when the vessel has moved more
   than 1 m or turned more than 10° since the last keyframe (:class:`KeyframeSelector`); the
   frames in between are dropped.
-* **Lidar odometry factor** (000 §V-A): the keyframe's LOAM features are registered
+* **Lidar odometry factor** (Roboat II §V-A): the keyframe's LOAM features are registered
   (:func:`scan_registration3d.register_scan`) against the voxel map M_t of the previous
   n = 25 keyframes, placed in the world frame with their *current* estimates, starting from the
-  caller's guess (000: IMU integration since the last keyframe). The result T_w,k gives the
+  caller's guess (Roboat II: IMU integration since the last keyframe). The result T_w,k gives the
   ``BetweenFactor`` X(k−1)⁻¹X(k) = T̂_w,k−1⁻¹ T_w,k with the noise of :func:`lidar_noise_model`.
 * **Attitude factor** (our addition, as LIO-SAM blends the IMU's roll and pitch into each
   match): the gravity direction measured by the AHRS in the body frame, b, must be the world's
@@ -20,17 +20,19 @@ local ENU frame of :class:`usvdrake.sensors.geodesy.LocalFrame`), and these fact
 * **Water-level factor** (our addition, optional): a floating hull's origin stays on the
   waterline, t_z = h (a 1-residual ``CustomFactor``, ∂t_z/∂v = R[2, :] for Pose3's right
   perturbation t ← t + R v). See ``water_level_sigma``.
-* **GPS factor** (000 §V-B): a fix converted to ENU (000 ref. [27]; here pyproj's topocentric
+* **GPS factor** (Roboat II §V-B): a fix converted to ENU (Roboat II ref. [27]; here pyproj's
+topocentric
   conversion) becomes a ``GPSFactor`` on the keyframe it is associated with — only after the
   validity, covariance and χ² innovation checks of :meth:`FactorGraph3D.add_gps`.
-* **Loop closure factor** (000 §V-C): the nearest old keyframe i within 15 m (Euclidean, on the
+* **Loop closure factor** (Roboat II §V-C): the nearest old keyframe i within 15 m (Euclidean, on
+the
   current estimate), excluding the most recent ones; the new keyframe is registered against the
   map of keyframes i−m … i+m (m = 12) and, when the match converges with a small RMS and is not
   degenerate, ``BetweenFactor`` X(i)⁻¹X(k) is added (Gaussian, as LIO-SAM's), followed by extra
   iSAM2 updates (as LIO-SAM's ``addLoopFactor`` + repeated ``isam->update()``).
 
 Every new keyframe triggers ``ISAM2.update`` (Kaess et al., "iSAM2: Incremental smoothing and
-mapping using the Bayes tree", IJRR 2012, 000 ref. [24]). All state is plain Python / numpy /
+mapping using the Bayes tree", IJRR 2012, Roboat II ref. [24]). All state is plain Python / numpy /
 gtsam in one object, so a later LeafSystem can keep it in its Context.
 """
 
@@ -71,11 +73,11 @@ def _loop_registration() -> RegistrationParams:
 
 @dataclass
 class FactorGraph3DConfig:
-    """Parameters of :class:`FactorGraph3D` (000 §V values where the paper gives them)."""
+    """Parameters of :class:`FactorGraph3D` (Roboat II §V values where the paper gives them)."""
 
-    keyframe_translation: float = 1.0  # [m] keyframe when position change exceeds (000 §V-A)
+    keyframe_translation: float = 1.0  # [m] keyframe when position change exceeds (Roboat II §V-A)
     keyframe_rotation: float = float(np.deg2rad(10.0))  # [rad] or rotation change exceeds
-    submap_keyframes: int = 25  # [keyframes] n: previous keyframes in M_t (000 §V-A)
+    submap_keyframes: int = 25  # [keyframes] n: previous keyframes in M_t (Roboat II §V-A)
     submap_edge_voxel: float = 0.2  # [m] voxel of M^e (LIO-SAM)
     submap_planar_voxel: float = 0.4  # [m] voxel of M^p (LIO-SAM)
     registration: RegistrationParams = field(default_factory=_odometry_registration)
@@ -101,13 +103,13 @@ class FactorGraph3DConfig:
     # on the waterline, t_z = ``water_level`` ± ``water_level_sigma``. Amsterdam's canals are
     # held at NAP −0.40 m within centimetres; the lidar sees few horizontal surfaces from the
     # water, so without it z random-walks through the degenerate matches (canal_survey: ±0.3 m
-    # at the finish, 1.9 m at worst with every loop closed). ≤ 0: none (000's graph).
+    # at the finish, 1.9 m at worst with every loop closed). ≤ 0: none (Roboat II's graph).
     water_level: float = 0.0  # [m] world z of the waterline (the body origin's height)
     water_level_sigma: float = 0.0  # [m]
-    # GPS factor (000 §V-B)
+    # GPS factor (Roboat II §V-B)
     use_gps: bool = True  # [-] False: GPS fixes are counted as rejected ("disabled")
     # [m] reject a fix whose largest horizontal σ exceeds this (LIO-SAM gpsCovThreshold); the
-    # vertical σ may be large (000 §VI-A: altitude errors of ~100 m) — it only weakens z
+    # vertical σ may be large (Roboat II §VI-A: altitude errors of ~100 m) — it only weakens z
     gps_max_sigma: float = 5.0
     gps_min_sigma: float = 1e-3  # [m] reject a fix whose smallest σ is below (not sane / non-PD)
     gps_gate_probability: float = 0.9999  # [-] χ²(3) gate on the innovation (21.1 for 0.9999)
@@ -124,11 +126,13 @@ class FactorGraph3DConfig:
     # factor of the mean of an AR(1) sequence (its effective sample size), so a run of factors
     # counts as the evidence it is. 0: fixes treated as independent (LIO-SAM).
     gps_correlation_time: float = 30.0
-    # Loop closure (000 §V-C)
+    # Loop closure (Roboat II §V-C)
     use_loop_closure: bool = True  # [-]
-    loop_search_radius: float = 15.0  # [m] candidate distance (000 §V-C)
+    loop_search_radius: float = 15.0  # [m] candidate distance (Roboat II §V-C)
     loop_min_index_gap: int = 50  # [keyframes] a candidate is at least this much older
-    loop_submap_half_width: int = 12  # [keyframes] m: candidate map F_{i−m} … F_{i+m} (000 §V-C)
+    loop_submap_half_width: int = (
+        12  # [keyframes] m: candidate map F_{i−m} … F_{i+m} (Roboat II §V-C)
+    )
     loop_max_rms: float = 0.1  # [m] accepted match: RMS point distance below this
     loop_cooldown: int = 3  # [keyframes] no new loop search this soon after an accepted one
     # [-] Cauchy kernel scale of the loop factor, in whitened-error units; 0: Gaussian (LIO-SAM).
@@ -150,7 +154,7 @@ def rotation_angle(R: np.ndarray) -> float:
 
 
 class KeyframeSelector:
-    """000 §V-A: a frame is a keyframe when its pose differs from the last keyframe's by more
+    """Roboat II §V-A: a frame is a keyframe when its pose differs from the last keyframe's by more
     than ``translation`` [m] or ``rotation`` [rad] (strictly: a change of exactly 1 m is not
     enough). The first frame is always a keyframe."""
 
@@ -223,7 +227,8 @@ def water_level_factor(key: int, level: float, sigma: float) -> gtsam.CustomFact
 
 @dataclass
 class KeyframeTiming:
-    """Wall-clock cost of one keyframe (000 §VI-A reports 79.3 ms for registration + update)."""
+    """Wall-clock cost of one keyframe (Roboat II §VI-A reports 79.3 ms for registration +
+    update)."""
 
     registration: float = 0.0  # [s] scan-to-submap match, incl. building the submap
     update: float = 0.0  # [s] ISAM2.update for the odometry (and GPS) factor
@@ -246,7 +251,7 @@ class FactorGraphCounts:
 
 
 class FactorGraph3D:
-    """Keyframe pose graph of 000 §V on ``gtsam.ISAM2``: lidar odometry, GPS and loop factors.
+    """Keyframe pose graph of Roboat II §V on ``gtsam.ISAM2``: lidar odometry, GPS and loop factors.
 
     Usage per keyframe (the caller selects keyframes with :class:`KeyframeSelector` and predicts
     the pose by IMU integration)::
@@ -256,7 +261,7 @@ class FactorGraph3D:
     adds, in LIO-SAM's order, the odometry factor (then ``isam.update``), the gated GPS factor
     (:meth:`add_gps`, also callable alone, e.g. for a fix that arrives later) and a loop factor
     (:meth:`close_loops`). ``config.use_gps`` and ``config.use_loop_closure`` switch the factor
-    types off (000 §VI-A ablation: lidar only; lidar + GPS; lidar + GPS + loop).
+    types off (Roboat II §VI-A ablation: lidar only; lidar + GPS; lidar + GPS + loop).
     """
 
     def __init__(self, config: FactorGraph3DConfig | None = None):
@@ -287,7 +292,8 @@ class FactorGraph3D:
         self.loops: list[tuple[int, int]] = []  # (old i, new k) of accepted loop factors
         self.registrations: list[RegistrationResult | None] = []  # odometry match per keyframe
 
-    # --- keyframes and lidar odometry (000 §V-A) -------------------------------------------------
+    # --- keyframes and lidar odometry (Roboat II §V-A)
+    # -------------------------------------------------
 
     def _world_clouds(self, i: int) -> tuple[np.ndarray, np.ndarray]:
         """Keyframe i's (edges, planes) in the world frame at its current estimate, cached
@@ -331,7 +337,7 @@ class FactorGraph3D:
     ) -> int:
         """Add keyframe k with its features (sensor frame) and return k.
 
-        T_guess: predicted T_world_keyframe (4 × 4; 000: from IMU integration since the last
+        T_guess: predicted T_world_keyframe (4 × 4; Roboat II: from IMU integration since the last
         keyframe). The first keyframe gets a prior at T_guess; later ones an odometry factor from
         registering against the previous ``submap_keyframes`` keyframes. gps: optional
         (ENU position (3,) [m], covariance (3 × 3) [m²]) added with :meth:`add_gps`; then
@@ -404,7 +410,8 @@ class FactorGraph3D:
         P[:, 3, 3] = 1.0
         self._poses = P
 
-    # --- GPS factor (000 §V-B) -------------------------------------------------------------------
+    # --- GPS factor (Roboat II §V-B)
+    # -------------------------------------------------------------------
 
     def _reject(self, reason: str) -> bool:
         self.counts.gps_rejected[reason] = self.counts.gps_rejected.get(reason, 0) + 1
@@ -490,17 +497,18 @@ class FactorGraph3D:
         self, k: int, fix: GpsFix, frame: LocalFrame, antenna_height: float = 0.0
     ) -> bool:
         """:meth:`add_gps` for a geodetic :class:`GpsFix`, converted to ``frame``'s ENU
-        (000 §V-B, ref. [27]); the antenna ``antenna_height`` [m] above the keyframe's origin
+        (Roboat II §V-B, ref. [27]); the antenna ``antenna_height`` [m] above the keyframe's origin
         (the pose's roll and pitch are small: the offset is taken as vertical)."""
         e, n, u = frame.to_local(fix.latitude, fix.longitude, fix.altitude)
         z = np.array([e, n, u - antenna_height])
         return self.add_gps(k, z, fix.covariance_enu, fix.valid, float(fix.time))
 
-    # --- loop closure (000 §V-C) -----------------------------------------------------------------
+    # --- loop closure (Roboat II §V-C)
+    # -----------------------------------------------------------------
 
     def loop_candidate(self, k: int) -> int | None:
         """Nearest keyframe i ≤ k − ``loop_min_index_gap`` within ``loop_search_radius`` of
-        keyframe k on the current estimate (000 §V-C's Euclidean search), or None."""
+        keyframe k on the current estimate (Roboat II §V-C's Euclidean search), or None."""
         c = self.config
         last_old = k - c.loop_min_index_gap
         if last_old < 0:

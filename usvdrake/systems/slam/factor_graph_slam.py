@@ -1,4 +1,4 @@
-"""``FactorGraphSlam``: Roboat II's lidar-IMU-GPS SLAM on iSAM2 (000 §V) as a LeafSystem."""
+"""``FactorGraphSlam``: Roboat II's lidar-IMU-GPS SLAM on iSAM2 (Roboat II §V) as a LeafSystem."""
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -44,10 +44,11 @@ class FactorGraphSlam(LeafSystem):
         - slam_pose3d
         - slam_map3d
 
-    ``slam_pose`` = [x y ψ] (what the controllers use, 000 §V) and ``slam_state`` = [x y ψ u v r]
-    (body velocities from the IMU propagation): the last keyframe's estimate propagated by the
-    IMU to now. ``slam_covariance`` (9, row-major 3 × 3) of [x y ψ] at the last keyframe (iSAM2
-    marginal). ``slam_pose3d`` = [x y z roll pitch yaw] [m, rad] of the full state.
+    ``slam_pose`` = [x y ψ] (what the controllers use, Roboat II §V) and ``slam_state`` =
+    [x y ψ u v r] (body velocities from the IMU propagation): the last keyframe's estimate
+    propagated by the IMU to now. ``slam_covariance`` (9, row-major 3 × 3) of [x y ψ] at the
+    last keyframe (iSAM2 marginal). ``slam_pose3d`` = [x y z roll pitch yaw] [m, rad] of the
+    full state.
     ``slam_map3d``: the map, a :class:`KeyframeMap` (every keyframe's features, voxel-filtered,
     with its current estimate; drawn by :class:`usvdrake.viz.point_map_visualizer.
     KeyframeMapVisualizer`).

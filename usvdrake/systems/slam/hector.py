@@ -1,6 +1,6 @@
 """Hector SLAM: scan-to-map Gauss-Newton matching on a multi-resolution occupancy grid.
 
-The SLAM that 003 runs in the NTNU basin ("Hector-SLAM ... does not require odometry data",
+The SLAM that Ueland 2017 runs in the NTNU basin ("Hector-SLAM ... does not require odometry data",
 §Mapping of Environment; 0.2 m map resolution, RPLIDAR A1 at 5.5 Hz, §Experimental Results).
 The algorithm is Kohlbrecher, Meyer, von Stryk and Klingauf, "A Flexible and Scalable SLAM
 System with Full 3D Motion Estimation", SSRR 2011, §IV (2D SLAM), written here from the paper:
@@ -181,11 +181,11 @@ def _between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 class HectorMapper:
-    """Hector SLAM (Kohlbrecher et al. 2011 §IV; as 003 uses it): multi-resolution log-odds
+    """Hector SLAM (Kohlbrecher et al. 2011 §IV; as Ueland 2017 uses it): multi-resolution log-odds
     maps and Gauss-Newton scan-to-map matching, without odometry.
 
     origin: (x, y) [m] of the maps' south-west corner; size: (width along x, height along y)
-    [m] of the mapped area; resolution: finest cell size [m] (003 used 0.2 m; the level
+    [m] of the mapped area; resolution: finest cell size [m] (Ueland 2017 used 0.2 m; the level
     ``k`` map has cells of resolution·2ᵏ); levels: number of maps in the pyramid;
     initial_pose: (x [m], y [m], ψ [rad]) of the sensor at the first scan, which is inserted
     there unmatched; iterations: Gauss-Newton steps per level at most; predict: start each
@@ -337,7 +337,7 @@ class HectorMapper:
 @dataclass
 class HectorConfig:
     resolution: float = (
-        0.05  # [m] finest map cell (003 maps the basin at 0.2 m; 0.05 matches better)
+        0.05  # [m] finest map cell (Ueland 2017 maps the basin at 0.2 m; 0.05 matches better)
     )
     levels: int = 3  # map pyramid levels (r, 2r, 4r)
     map_origin: list[float] = field(default_factory=lambda: [-2.025, -1.025])  # [m]

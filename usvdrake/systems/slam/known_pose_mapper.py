@@ -1,9 +1,11 @@
 """``KnownPoseMapper``: an occupancy grid from the lidar at a known pose — "mapping with known
-poses", the ground-truth map source of the exploration loop (003 before its SLAM is trusted).
+poses", the ground-truth map source of the exploration loop (Ueland 2017 before its SLAM is
+trusted).
 
 With the pose from the oracle estimator it isolates the exploration and control from the SLAM
 errors: the map is what a perfect SLAM would build from the same scans (same log-odds grid,
-:class:`LogOddsGrid`, eqs. 15-16 of 002), not the world's full ground-truth occupancy, which the
+:class:`LogOddsGrid`, eqs. 15-16 of Pham et al.), not the world's full ground-truth occupancy, which
+the
 vessel would know before looking.
 """
 

@@ -1,7 +1,7 @@
 """LOAM-style edge and planar features of a multi-ring lidar sweep, on its range image.
 
-000 §V-A (Roboat II) extracts the lidar frame F_t = {F_t^e, F_t^p} as LeGO-LOAM / LIO-SAM do
-(000 ref. [25]): project the sweep onto a range image (ring × azimuth column), compute a
+Roboat II §V-A (Roboat II) extracts the lidar frame F_t = {F_t^e, F_t^p} as LeGO-LOAM / LIO-SAM do
+(Roboat II ref. [25]): project the sweep onto a range image (ring × azimuth column), compute a
 roughness value per pixel from its neighbours in the same ring, take the roughest pixels as
 edge features and the smoothest as planar features, a few per sector of each ring so that
 features are spread around the sensor (Zhang & Singh, "LOAM: Lidar Odometry and Mapping in
@@ -58,7 +58,7 @@ class FeatureParams:
 
 @dataclass
 class LidarFeatures:
-    """Edge (F^e) and planar (F^p) features of one sweep, in the sensor frame (000 §V-A)."""
+    """Edge (F^e) and planar (F^p) features of one sweep, in the sensor frame (Roboat II §V-A)."""
 
     edge_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # [m]
     planar_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # [m]
@@ -215,7 +215,7 @@ def pixel_points(cloud: PointCloud) -> np.ndarray:
 
 
 def extract_features(cloud: PointCloud, params: FeatureParams | None = None) -> LidarFeatures:
-    """Edge and planar features of one sweep (000 §V-A; LOAM §V-A; LIO-SAM featureExtraction).
+    """Edge and planar features of one sweep (Roboat II §V-A; LOAM §V-A; LIO-SAM featureExtraction).
 
     cloud: an organised sweep (its ``range_image`` [m], inf = no return; ``points``, ``ring``,
     ``column`` of its returns). Each ring's returns are cut into ``params.sectors`` runs; in

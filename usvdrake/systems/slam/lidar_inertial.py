@@ -1,8 +1,8 @@
-"""Roboat II's lidar-IMU-GPS SLAM front end (000 §V), numerical core of ``FactorGraphSlam``.
+"""Roboat II's lidar-IMU-GPS SLAM front end (Roboat II §V), numerical core of ``FactorGraphSlam``.
 
 Per sensor message, in time order (:class:`LidarInertialSlam`):
 
-* **IMU** (000 §V-A: "initial guess from IMU integration since the last keyframe"):
+* **IMU** (Roboat II §V-A: "initial guess from IMU integration since the last keyframe"):
   :class:`ImuPropagator` integrates the gyro and the specific force from the last keyframe's
   estimate, R ← R Exp(ω̃ Δt), v ← v + (R f̃ − g e_z) Δt, p ← p + v Δt + ½ (R f̃ − g e_z) Δt²
   (strapdown navigation on SO(3) × R³, Forster et al., T-RO 2017, eq. (31) with the biases left
@@ -11,20 +11,21 @@ Per sensor message, in time order (:class:`LidarInertialSlam`):
   v_k = v̂_k + (p_k − p̂_k)/Δt (the position error of one interval is a velocity error over it),
   kept in the body frame so that a later correction of the pose turns it too.
 * **Lidar**: the predicted pose at the sweep's end decides whether the sweep is a keyframe
-  (000 §V-A, > 1 m or > 10° from the last keyframe's *estimate*); other sweeps are dropped.
+  (Roboat II §V-A, > 1 m or > 10° from the last keyframe's *estimate*); other sweeps are dropped.
   A keyframe's points are de-skewed to the sweep's end with the constant body twist of the IMU
   (LIO-SAM's ``deskewPoint``; each point is measured in the sensor frame of its firing time),
   LOAM features are extracted (:func:`lidar_features.extract_features`), moved to the body
   frame through the lidar mount, and added to :class:`FactorGraph3D`, whose registration
   against the previous 25 keyframes starts from the IMU guess.
-* **GPS** (000 §V-B): the fixes are kept for ``gps_window`` s; a keyframe takes the valid fix
+* **GPS** (Roboat II §V-B): the fixes are kept for ``gps_window`` s; a keyframe takes the valid fix
   nearest in time within ``gps_max_offset`` (LIO-SAM: 0.2 s), converted to the local ENU frame
   with pyproj (:class:`usvdrake.sensors.geodesy.LocalFrame`) and gated by the graph.
 
 The state is the full 3D body pose T_world_body (gtsam ``Pose3``): the controllers only use
-[x y ψ] (000 §V), but a 3D graph keeps roll, pitch and height apart from the plane's errors, so
+[x y ψ] (Roboat II §V), but a 3D graph keeps roll, pitch and height apart from the plane's errors,
+so
 a wrong height from GPS altitude or a tilted registration does not leak into x, y, ψ — and the
-vertical drift is observable for the ablation (000 §VI-A).
+vertical drift is observable for the ablation (Roboat II §VI-A).
 """
 
 import time
@@ -58,7 +59,7 @@ class LidarInertialConfig:
     features: FeatureParams = field(default_factory=FeatureParams)
     deskew: bool = True  # [-] move each point to the sweep's end with the IMU's twist
     gravity: float = STANDARD_GRAVITY  # [m/s²] subtracted from the rotated specific force
-    # A surface vessel does not heave (000 eq. (1) is 3-DOF): the IMU prediction keeps the
+    # A surface vessel does not heave (Roboat II eq. (1) is 3-DOF): the IMU prediction keeps the
     # vertical velocity at 0. Without it the accelerometer's z bias (3DM-GX5-25: ±0.02 m/s²)
     # integrates into a vertical velocity that no degenerate (wall-only) match can correct,
     # and the guess climbs metres per minute.
@@ -217,7 +218,7 @@ class KeyframeMap:
 
 
 class LidarInertialSlam:
-    """000 §V's SLAM over :class:`FactorGraph3D`, fed one message at a time (module doc).
+    """Roboat II §V's SLAM over :class:`FactorGraph3D`, fed one message at a time (module doc).
 
     initial_pose: T_world_body (4 × 4) at t0 (the vessel starts at a known pose, as Roboat II
     starts at its dock); mount: T_body_lidar (4 × 4); frame: the ENU frame of the world (GPS

@@ -1,4 +1,5 @@
-"""``LidarSlam2D`` (002's sliding-window graph SLAM) and ``HectorSlam`` (003's Hector-style
+"""``LidarSlam2D`` (Pham et al.'s sliding-window graph SLAM) and ``HectorSlam`` (Ueland 2017's
+Hector-style
 SLAM) on the station's ``lidar_scan``: one LeafSystem shell over interchangeable backends."""
 
 import numpy as np
@@ -40,7 +41,7 @@ class LidarSlam2D(LeafSystem):
     started however fast the machine is (a solve still running then is waited for), so a
     simulation stays deterministic.
 
-    ``odometry`` (graph backend only; leave it unconnected for scan-only SLAM, as 002): the
+    ``odometry`` (graph backend only; leave it unconnected for scan-only SLAM, as Pham et al.): the
     vessel's [x y ψ] by dead reckoning (wheel odometry, a DVL's integrated velocity) in its own
     frame; its steps, calibrated by the scans, tie the graph's nodes where the scans cannot
     measure the motion (``GraphSlamConfig.odometry_sigma``), and are left out where they
@@ -123,7 +124,7 @@ class LidarSlam2D(LeafSystem):
 
 
 class HectorSlam(LidarSlam2D):
-    """The Hector-style SLAM of 003 (Kohlbrecher et al. 2011: multi-resolution scan-to-map
+    """The Hector-style SLAM of Ueland 2017 (Kohlbrecher et al. 2011: multi-resolution scan-to-map
     Gauss-Newton, no odometry) behind the same ports as :class:`LidarSlam2D`."""
 
     def __init__(self, cfg: HectorConfig, initial_pose, mount, period: float):

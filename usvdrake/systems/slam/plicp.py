@@ -1,13 +1,13 @@
 """Point-to-line ICP (PLICP) for 2D laser scans: the numerical core of the scan matcher.
 
-Censi, "An ICP variant using a point-to-line metric", ICRA 2008, as used by 002 §II-A.
+Censi, "An ICP variant using a point-to-line metric", ICRA 2008, as used by Pham et al. §II-A.
 Each iteration pairs every current point p_i (transformed by the estimate) with the closest
 reference point a_i and the closer of its two neighbours *in scan order* b_i, and minimises
-the point-to-line error (002 eq. 1)
+the point-to-line error (Pham et al. eq. 1)
 
     J(t, θ) = Σ_i w_i (n_iᵀ (R(θ) p_i + t − a_i))²,   n_i ⊥ (b_i − a_i), |n_i| = 1,
 
-exactly, in closed form (:func:`solve_point_to_line`, 002 eqs. 2-3). Because each step is an
+exactly, in closed form (:func:`solve_point_to_line`, Pham et al. eqs. 2-3). Because each step is an
 exact minimiser over fixed correspondences, the iteration stops as soon as the correspondences
 repeat (Censi's finite convergence) or the step falls below a tolerance.
 
@@ -89,22 +89,24 @@ def _quadratic_form(p, q, n, w):
 def solve_point_to_line(
     p: np.ndarray, q: np.ndarray, n: np.ndarray, w: np.ndarray | None = None
 ) -> tuple[np.ndarray, float]:
-    """Exact minimiser (t [m], θ [rad]) of Σ w_i (n_iᵀ (R(θ) p_i + t − q_i))² (002 eq. 1).
+    """Exact minimiser (t [m], θ [rad]) of Σ w_i (n_iᵀ (R(θ) p_i + t − q_i))² (Pham et al. eq. 1).
 
     Censi 2008 §IV: with x = [t, cos θ, sin θ] the cost is xᵀ M x + gᵀ x + const subject to
     xᵀ W x = 1, W = diag(0, 0, 1, 1). The Lagrange condition (2M + 2λW) x = −g and the
-    constraint give 002 eq. 2, gᵀ (2M + 2λW)⁻ᵀ W (2M + 2λW)⁻¹ g = 1. Writing
+    constraint give Pham et al. eq. 2, gᵀ (2M + 2λW)⁻ᵀ W (2M + 2λW)⁻¹ g = 1. Writing
     2M = [[A, B], [Bᵀ, D]] (2 × 2 blocks), S = D − Bᵀ A⁻¹ B, S^A = |S| S⁻¹ its adjugate and
     h = g_r − Bᵀ A⁻¹ g_t, the rotation part is x_r = −(S + 2λI)⁻¹ h = −(S^A + 2λI) h / |S + 2λI|,
-    so |x_r|² = 1 is the quartic (002 eq. 3)
+    so |x_r|² = 1 is the quartic (Pham et al. eq. 3)
 
         16 λ⁴ + 16 tr S λ³ + (8|S| + 4 tr²S − 4 hᵀh) λ² + (4|S| tr S − 4 hᵀ S^A h) λ
         + |S|² − hᵀ S^A S^A h = 0.
 
-    002's coefficient list is garbled in extraction: it writes hᵀ X h expanded through g with
+    Pham et al.'s coefficient list is garbled in extraction: it writes hᵀ X h expanded through g
+    with
     non-transposed off-diagonal blocks (−A⁻¹B where −Bᵀ A⁻ᵀ belongs), "1" for the identity, and
     an undefined "T" in e (it is the identity: hᵀ S^A S^A h). We implement the form above, in
-    002's convention that A, B, D are blocks of 2M. Every real root gives a stationary point;
+    Pham et al.'s convention that A, B, D are blocks of 2M. Every real root gives a stationary
+    point;
     we polish each root's θ by Newton steps on the reduced cost ½ uᵀ S u + hᵀ u,
     u = (cos θ, sin θ), take the one of least cost (the global minimum is among them) and set
     t = −A⁻¹ (g_t + B x_r).
@@ -238,7 +240,8 @@ def plicp(
     Each iteration transforms the current points by the estimate, finds correspondences
     (:func:`find_correspondences`, at most ``max_distance`` [m] away, segments at most
     ``max_segment`` [m] long), keeps the ``trim`` fraction with the least point-to-line error
-    (trimmed ICP) and solves 002 eq. 1 exactly with :func:`solve_point_to_line`. It stops when
+    (trimmed ICP) and solves Pham et al. eq. 1 exactly with :func:`solve_point_to_line`. It stops
+    when
     the correspondences repeat (the solve would return the same pose) or the step is below
     ``tolerance_t`` [m] and ``tolerance_theta`` [rad]. ``rotation_search`` first replaces the
     initial θ by :func:`coarse_rotation`. ``tree``: a prebuilt ``cKDTree(reference)``.

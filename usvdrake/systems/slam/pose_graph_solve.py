@@ -1,12 +1,13 @@
 """The planar pose graph's solve as plain data in, plain data out, so that the full-graph
 optimisation a loop closure asks for can run in a worker process while the scans keep being
-tracked (002 §II-C runs it in its own thread; gtsam holds Python's lock while it solves, so
+tracked (Pham et al. §II-C runs it in its own thread; gtsam holds Python's lock while it solves, so
 here it is a process).
 
 :class:`PoseGraphProblem` is what :class:`graph_slam.GraphSlam` hands over (node poses,
 constraints, which loops GNC may reject); :func:`solve_pose_graph` builds the gtsam graph in
 the same order every time and solves it by Levenberg-Marquardt (gtsam, at most
-``max_iterations`` steps, 002 §V-A) or, with loop candidates, by graduated non-convexity with
+``max_iterations`` steps, Pham et al. §V-A) or, with loop candidates, by graduated non-convexity
+with
 the truncated least squares loss (Yang et al. 2020, gtsam's ``GncLMOptimizer``). The same
 problem gives the same solution to the bit whether solved here or in :func:`worker`'s
 process.

@@ -1,7 +1,7 @@
-"""Scan-to-map registration of LOAM features: the lidar odometry factor of 000 §V-A.
+"""Scan-to-map registration of LOAM features: the lidar odometry factor of Roboat II §V-A.
 
 A keyframe's features F_{t+1} = {F^e, F^p} (sensor frame, :mod:`lidar_features`) are
-registered against the voxel maps M_t = {M^e, M^p} of the previous n keyframes (000 §V-A,
+registered against the voxel maps M_t = {M^e, M^p} of the previous n keyframes (Roboat II §V-A,
 n = 25) by minimising point-to-line and point-to-plane distances (LOAM §VI, eqs. (2)-(3),
 in the mapping form of LOAM §VI-B / LIO-SAM ``scan2MapOptimization``):
 
@@ -79,7 +79,7 @@ class RegistrationParams:
 
 @dataclass
 class FeatureMap:
-    """Voxel maps M^e, M^p (000 §V-A) in the map frame, with their KD-trees."""
+    """Voxel maps M^e, M^p (Roboat II §V-A) in the map frame, with their KD-trees."""
 
     edge_points: np.ndarray  # (Ne × 3) [m]
     planar_points: np.ndarray  # (Np × 3) [m]
@@ -135,7 +135,7 @@ def build_feature_map(
     edge_voxel: float = 0.2,
     planar_voxel: float = 0.4,
 ) -> FeatureMap:
-    """Merge keyframe features into the voxel maps M^e = ∪ 'F^e, M^p = ∪ 'F^p (000 §V-A).
+    """Merge keyframe features into the voxel maps M^e = ∪ 'F^e, M^p = ∪ 'F^p (Roboat II §V-A).
 
     edge_clouds, planar_clouds: per keyframe, (N × 3) [m] in its sensor frame; poses: per
     keyframe T_map_keyframe (4 × 4), identity if None; edge_voxel, planar_voxel: voxel sides
@@ -432,10 +432,10 @@ def register_scan(
     T_init: np.ndarray | None = None,
     params: RegistrationParams | None = None,
 ) -> RegistrationResult:
-    """Register one scan's features to the feature map (LOAM §VI-B; 000 §V-A).
+    """Register one scan's features to the feature map (LOAM §VI-B; Roboat II §V-A).
 
     source: features of the new keyframe in its sensor frame; feature_map: M_t;
-    T_init: initial T_map_source (4 × 4), identity if None (000: the IMU's prediction).
+    T_init: initial T_map_source (4 × 4), identity if None (Roboat II: the IMU's prediction).
     Returns the refined T_map_source, iteration count, information / covariance in
     ξ = (ω, v) (body frame, right perturbation) and the degeneracy indicator."""
     prm = params or RegistrationParams()

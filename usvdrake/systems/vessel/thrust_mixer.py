@@ -1,4 +1,5 @@
-"""``ThrustMixer``: per-thruster commands → generalised force τ (000 eq. 3), with saturation."""
+"""``ThrustMixer``: per-thruster commands → generalised force τ (Roboat II eq. 3), with
+saturation."""
 
 import numpy as np
 from pydrake.systems.framework import LeafSystem_

@@ -1,9 +1,9 @@
-"""Thruster layouts: per-thruster commands → generalised force τ (000 eq. 3 and its kin).
+"""Thruster layouts: per-thruster commands → generalised force τ (Roboat II eq. 3 and its kin).
 
 A thruster at body position (x, y) pushing with force f along the body-frame angle α contributes
     τ = f [cos α,  sin α,  x sin α − y cos α]ᵀ
 (Fossen 2011 §12.3, yaw moment = x F_y − y F_x with y to port). For Roboat II's layout this is
-the B of 000 eq. (3) (yaw row mirrored for the y-left frame, see ``vessels/roboat2.yaml``).
+the B of Roboat II eq. (3) (yaw row mirrored for the y-left frame, see ``vessels/roboat2.yaml``).
 
 The thruster command vector holds, thruster by thruster, [f] for a fixed thruster and [f, α] for
 an azimuth thruster (force [N], angle [rad]). Everything here works on float, AutoDiffXd and
@@ -74,7 +74,7 @@ def thrust_envelope(thrusters: list[Thruster]) -> np.ndarray:
 
 
 def configuration_matrix(thrusters: list[Thruster]) -> np.ndarray:
-    """B (3 × n) for fixed thrusters at their mounting angles: τ = B f (000 eq. 3)."""
+    """B (3 × n) for fixed thrusters at their mounting angles: τ = B f (Roboat II eq. 3)."""
     cols = []
     for t in thrusters:
         a = np.deg2rad(t.angle_deg)

@@ -1,6 +1,7 @@
 """Discrete-time vessel model for the optimisers (NMPC, NMHE, identification).
 
-q_{k+1} = F(q_k, τ_k) is one classical Runge-Kutta 4 step of 000 eq. (7) (``vessel_derivatives``,
+q_{k+1} = F(q_k, τ_k) is one classical Runge-Kutta 4 step of Roboat II eq. (7)
+(``vessel_derivatives``,
 still water) over h seconds with τ held constant (zero-order hold), batched over many (q, τ)
 pairs. :func:`rk4_with_jacobians` also returns A = ∂F/∂q and B = ∂F/∂τ, propagated exactly
 through the four stages from the analytic continuous Jacobians of :func:`continuous_jacobians`

@@ -1,4 +1,4 @@
-"""3-DOF vessel dynamics of 000 §IV-A, eqs. (1)-(6), for any Drake scalar type.
+"""3-DOF vessel dynamics of Roboat II §IV-A, eqs. (1)-(6), for any Drake scalar type.
 
     η̇ = T(ψ) ν                                             (1)
     ν̇ = M⁻¹ (τ + τ_env) − M⁻¹ (C(ν) ν + D (ν − ν_c))        (2) with drag on the relative velocity

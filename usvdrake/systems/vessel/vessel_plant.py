@@ -1,4 +1,5 @@
-"""``VesselPlant``: the 3-DOF vessel of 000 eqs. (1)-(8) as a scalar-convertible LeafSystem."""
+"""``VesselPlant``: the 3-DOF vessel of Roboat II eqs. (1)-(8) as a scalar-convertible
+LeafSystem."""
 
 import numpy as np
 from pydrake.common.containers import namedview
@@ -15,7 +16,7 @@ VesselState = namedview("VesselState", ["x", "y", "psi", "u", "v", "r"])
 def VesselPlant_(T):
     class Impl(LeafSystem_[T]):
         """Continuous 3-DOF vessel: q = [x y ψ u v r] (world ENU position [m], heading [rad],
-        body surge/sway [m/s], yaw rate [rad/s]); q̇ = f(q, τ) of 000 eq. (7).
+        body surge/sway [m/s], yaw rate [rad/s]); q̇ = f(q, τ) of Roboat II eq. (7).
 
         .. pydrake_system::
 

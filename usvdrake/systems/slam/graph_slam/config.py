@@ -49,7 +49,7 @@ class GraphSlamConfig:
     min_loop_points: int = 100  # correspondences a loop match needs
     # [m] > 0: a loop candidate is first searched by the correlative matcher within this
     # window (and ± loop_angular_window) of the graph's relative pose, and kept only if its
-    # likelihood score reaches min_loop_score; 0: PLICP's own rotation search (002)
+    # likelihood score reaches min_loop_score; 0: PLICP's own rotation search (Pham et al.)
     loop_linear_window: float = 0.0
     loop_submap: int = 3  # [nodes] either side of a loop candidate (before the new node) matched
     # PLICP refines a searched loop against the candidate's submap (True) or its scan (False)
@@ -76,7 +76,7 @@ class GraphSlamConfig:
     # relink_max_links of them, spread over their indices; 0: all), a match moving less than
     # relink_max_correction [m] from it, scoring min_loop_score and passing the link checks is
     # added as a loop (GNC candidate, tracking covariance), and the whole graph is optimised
-    # once more (ours, not 002's)
+    # once more (ours, not Pham et al.'s)
     relink_radius: float = 0.0
     relink_max_links: int = 0
     relink_max_correction: float = 0.3
@@ -86,11 +86,11 @@ class GraphSlamConfig:
     # > 0: consecutive constraints take the spread of the tracking field's score around the
     # match at this temperature (Olson 2009 §III-C, correlative.match_covariance) above the
     # min_sigma floor, instead of Censi's closed form, which stays centimetre-small along a
-    # corridor (ours, not 002's; 0: Censi's)
+    # corridor (ours, not Pham et al.'s; 0: Censi's)
     landscape_temperature: float = 0.0
     min_sigma: list[float] = field(default_factory=lambda: [0.01, 0.01, 0.005])  # [m, m, rad] floor
     # Wheel odometry, when the scans come with it (GraphSlam.process's ``odometry``; ours, not
-    # 002's, which has none). It ties a node to the node where the odometry had gone
+    # Pham et al.'s, which has none). It ties a node to the node where the odometry had gone
     # odometry_span [m] (or 1 rad) before, a robust constraint
     # with a random walk's covariance of [m/√m travelled, rad/√rad turned, rad/√m travelled]
     # (odometry_covariance): along a corridor, where the scans do not measure the motion, it
@@ -113,16 +113,16 @@ class GraphSlamConfig:
     # (GraphSlam.odometry_scale): steps whose tracking σ along the motion is within this [m]
     odometry_calibrate: bool = True
     odometry_calibration_sigma: float = 0.02
-    max_iterations: int = 100  # LM steps (002 §V-A)
-    # the full optimisations a loop asks for run in a worker process (002: its own thread),
+    max_iterations: int = 100  # LM steps (Pham et al. §V-A)
+    # the full optimisations a loop asks for run in a worker process (Pham et al.: its own thread),
     # started and merged by the caller's slower event (GraphSlam.background); False: inline
     full_in_worker: bool = True
     # De-skew each scan to its last beam with the last scan-to-scan motion as a constant
     # twist, when the scan says its beams fired over time (``LaserScan.time_increment`` > 0).
-    # Ours, not 002's: on valley_survey the sweep's own motion biased the matches while
+    # Ours, not Pham et al.'s: on valley_survey the sweep's own motion biased the matches while
     # turning (180 s: online ATE 0.153 m with the motion simulated, 0.052 m without).
     deskew: bool = True
-    map_resolution: float = 0.2  # [m] online map (002 §V-B: 0.4 m in the valley)
+    map_resolution: float = 0.2  # [m] online map (Pham et al. §V-B: 0.4 m in the valley)
     map_origin: list[float] = field(default_factory=lambda: [-150.0, -150.0])  # [m]
     map_size: list[float] = field(default_factory=lambda: [300.0, 300.0])  # [m] width, height
     max_range: float = 30.0  # [m] beyond this a beam counts as no return for the map
