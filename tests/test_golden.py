@@ -38,11 +38,13 @@ def _compare(got, want, key: str, errors: list[str]) -> None:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", available_scenarios())
-def test_metrics_match_the_golden_outputs(name):
+def test_metrics_match_the_golden_outputs(name, tmp_path):
     golden = GOLDEN / f"{name}.json"
     assert golden.is_file(), f"no golden output for {name}: run python tests/golden/record.py"
     scenario = with_overrides(load_scenario(name), duration=DURATION, seed=0)
-    metrics = run_mission(scenario, record=False).metrics
+    metrics = run_mission(scenario, out_dir=tmp_path, record=False).metrics
+    report = "fleet.png" if scenario.controller == "taxi" else "report.html"
+    assert (tmp_path / "metrics.json").is_file() and (tmp_path / report).is_file()
     errors: list[str] = []
     _compare(metrics, json.loads(golden.read_text()), "", errors)
     assert not errors, f"{name}: {len(errors)} metrics changed:\n" + "\n".join(errors)
