@@ -2,10 +2,14 @@
 
 ``load_scenario("canal_demo")`` reads ``usvdrake/scenarios/canal_demo.yaml``; a path works too.
 A bad file stops with a one-line :class:`~usvdrake.typed_yaml.ConfigError` (file, key, expected,
-got). Directions are ENU angles counter-clockwise from east, pointing where the flow goes.
+got): every number must be finite and within :data:`RANGES` (bounds that keep a run from stalling
+the integrator or needing more than a few GB). Directions are ENU angles counter-clockwise from
+east, pointing where the flow goes.
 """
 
 import dataclasses
+import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -35,7 +39,7 @@ from usvdrake.systems.vessel.environment_model import (
     WaveConfig,
     WindConfig,
 )
-from usvdrake.typed_yaml import ConfigError, get_dotted, load_typed, resolve_yaml
+from usvdrake.typed_yaml import ConfigError, get_dotted, is_plain_name, load_typed, resolve_yaml
 from usvdrake.vessel import VESSEL_DIR, available_vessels
 from usvdrake.worlds import available_worlds, make_world
 
@@ -232,38 +236,139 @@ class Scenario:
     fleet: FleetConfig = field(default_factory=FleetConfig)
 
 
-# Scenario values that must be > 0, and >= 0 (dotted keys, checked by validate_scenario).
-POSITIVE_KEYS = (
-    "duration",
-    "nmpc.horizon",
-    "nmpc.dt",
-    "mission.acceptance_radius",
-    "mission.slowdown_radius",
-    "control.rate_hz",
-    "control.lookahead",
-    "control.heading_natural_frequency",
-    "control.heading_damping",
-    "control.surge_bandwidth",
-    "control.sway_bandwidth",
-    "visualization.rate_hz",
-    "visualization.trail_chunk",
-    "simulation.accuracy",
-    "simulation.max_step",
-    "environment.update_period",
-    "environment.waves.peak_period",
-    "environment.wind.gust_time_constant",
-    "environment.current.variation_time_constant",
-)
-NON_NEGATIVE_KEYS = (
-    "mission.speed",
-    "environment.current.speed",
-    "environment.current.variation_std",
-    "environment.wind.mean_speed",
-    "environment.wind.gust_std",
-    "environment.waves.significant_height",
-    "visualization.arrow_length",
-    "visualization.occupancy_resolution",
-)
+# The ranges of a scenario's numbers: dotted key → (low, high), both inclusive, or
+# (low, high, "(]") with the low end excluded. ``a.b`` covers every item of a list field ``a.b``;
+# ``x[i]`` one item; ``[*]`` any item of a list of configs; a key starting with ``*`` every key
+# ending so (an exact key wins). Every number must first be finite. The caps keep a run from
+# stalling the integrator or needing more than a few GB.
+DAY = 86400.0
+RANGES: dict[str, tuple] = {
+    "duration": (0.0, DAY, "(]"),
+    "seed": (0, 2**32 - 1),
+    "*rate_hz": (0.0, 1000.0, "(]"),  # every update rate
+    "sensors.lidar2d.rate_hz": (0.0, 1000.0),  # 0: the preset's
+    "sensors.lidar3d.rate_hz": (0.0, 1000.0),
+    "simulation.max_step": (1e-4, 60.0),
+    "simulation.accuracy": (1e-10, 1.0),
+    "environment.update_period": (1e-3, 3600.0),
+    "model_error": (0.1, 10.0),
+    "initial_state[3]": (-20.0, 20.0),  # [m/s] u
+    "initial_state[4]": (-20.0, 20.0),  # [m/s] v
+    "initial_state[5]": (-10.0, 10.0),  # [rad/s] r
+    "fleet.vessels[*].initial_state[3]": (-20.0, 20.0),
+    "fleet.vessels[*].initial_state[4]": (-20.0, 20.0),
+    "fleet.vessels[*].initial_state[5]": (-10.0, 10.0),
+    "environment.wind.mean_speed": (0.0, 60.0),
+    "environment.wind.gust_std": (0.0, 30.0),
+    "environment.wind.gust_time_constant": (0.0, DAY, "(]"),
+    "environment.wind.air_density": (0.0, 100.0, "(]"),
+    "environment.current.speed": (0.0, 10.0),
+    "environment.current.variation_std": (0.0, 5.0),
+    "environment.current.variation_time_constant": (0.0, DAY, "(]"),
+    "environment.waves.significant_height": (0.0, 10.0),
+    "environment.waves.peak_period": (0.5, 30.0),
+    "environment.waves.components": (1, 1000),
+    "nmpc.horizon": (0.0, 60.0, "(]"),  # [s]; and at most NMPC_MAX_STEPS intervals of nmpc.dt
+    "nmpc.dt": (0.01, 10.0),
+    "nmpc.nlp_max_iterations": (1, 1000),
+    "nmhe.horizon": (2, 200),  # [samples]
+    "nmhe.disturbance_std": (0.0, 1e6, "(]"),
+    "nmhe.accel_std": (0.0, 1e6, "(]"),
+    "nmhe.gyro_std": (0.0, 1e6, "(]"),
+    "nmhe.bias_std": (0.0, 1e6),  # 0: no slow force
+    "nmhe.accel_bias_std": (0.0, 1e6),  # 0: bias not learnt
+    "nmhe.pose_variance": (0.0, 1e12, "(]"),
+    "nmhe.thrust_variance": (0.0, 1e12, "(]"),
+    "nmhe.angle_variance": (0.0, 1e12, "(]"),
+    "nmhe.arrival_variance": (0.0, 1e12, "(]"),
+    "mission.speed": (0.0, 20.0),
+    "mission.acceptance_radius": (0.0, 1e4, "(]"),
+    "mission.slowdown_radius": (0.0, 1e4, "(]"),
+    "control.lookahead": (0.0, 1e4, "(]"),
+    "control.heading_natural_frequency": (0.0, 100.0, "(]"),
+    "control.heading_damping": (0.0, 100.0, "(]"),
+    "control.surge_bandwidth": (0.0, 100.0, "(]"),
+    "control.sway_bandwidth": (0.0, 100.0, "(]"),
+    "visualization.trail_chunk": (0.01, DAY),
+    "visualization.arrow_length": (0.0, 100.0),
+    "visualization.occupancy_resolution": (0.0, 100.0),  # 0: off
+    "slam.hector.resolution": (0.01, 10.0),
+    "slam.graph.map_resolution": (0.05, 10.0),
+    "exploration.explorer.resolution": (0.01, 10.0),
+    "fleet.taxi.resolution": (0.05, 100.0),
+    "fleet.assignment_resolution": (0.05, 100.0),
+    "fleet.coordinator_period": (1e-3, DAY),
+    "hardware.stale_timeout": (0.0, 3600.0, "(]"),
+    "hardware.sensor_timeout": (0.0, 3600.0, "(]"),
+    "hardware.poll_period": (1e-4, 10.0),
+}
+NMPC_MAX_STEPS = 200  # nmpc.horizon / nmpc.dt: the QP grows with the intervals
+
+
+def number_leaves(obj, key: str = ""):
+    """Every number of a config tree as ``(dotted key, value)``: dataclass fields, list items
+    (``key[i]``) and mapping values, at any depth (bools are not numbers)."""
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        for f in dataclasses.fields(obj):
+            yield from number_leaves(getattr(obj, f.name), f"{key}.{f.name}" if key else f.name)
+    elif isinstance(obj, (list, tuple)):
+        for i, v in enumerate(obj):
+            yield from number_leaves(v, f"{key}[{i}]")
+    elif isinstance(obj, dict):
+        for k, v in obj.items():
+            yield from number_leaves(v, f"{key}.{k}")
+    elif isinstance(obj, (int, float, np.number)) and not isinstance(obj, (bool, np.bool_)):
+        yield key, obj
+
+
+def range_of(key: str) -> tuple | None:
+    """The :data:`RANGES` rule for a number's dotted key (``fleet.vessels[1].initial_state[3]``),
+    or None."""
+    inner = re.sub(r"\[\d+\](?=.)", "[*]", key)  # all indices but a last one → [*]
+    candidates = [inner, re.sub(r"\[\d+\]$", "", inner)]
+    for c in candidates:
+        if c in RANGES:
+            return RANGES[c]
+    for c in candidates:
+        for pattern, rule in RANGES.items():
+            if pattern.startswith("*") and c.endswith(pattern[1:]):
+                return rule
+    return None
+
+
+def in_range(value, rule: tuple) -> bool:
+    low, high, *ends = rule
+    above = value > low if ends == ["(]"] else value >= low
+    return bool(above and value <= high)
+
+
+def describe_range(rule: tuple) -> str:
+    low, high, *ends = rule
+    if ends == ["(]"]:
+        kind = "a positive number" if low == 0 else "a number"
+        return f"{kind} in ({low:g}, {high:g}]"
+    return f"a number in [{low:g}, {high:g}]"
+
+
+def check_numbers(s: Scenario, file: str | Path = "scenario") -> None:
+    """Every number finite, then every number with a :data:`RANGES` rule within it (one
+    ConfigError naming the key, the range and the value)."""
+    leaves = list(number_leaves(s))
+    for key, value in leaves:
+        if isinstance(value, (float, np.floating)) and not math.isfinite(value):
+            raise ConfigError(file, key, "a finite number", repr(float(value)))
+    for key, value in leaves:
+        rule = range_of(key)
+        if rule is not None and not in_range(value, rule):
+            raise ConfigError(file, key, describe_range(rule), repr(value))
+    steps = s.nmpc.horizon / s.nmpc.dt
+    if steps > NMPC_MAX_STEPS:
+        raise ConfigError(
+            file,
+            "nmpc.horizon",
+            f"at most {NMPC_MAX_STEPS} intervals of nmpc.dt ({s.nmpc.dt:g} s)",
+            f"{s.nmpc.horizon!r} ({steps:.0f} intervals)",
+        )
 
 
 def available_scenarios() -> list[str]:
@@ -280,11 +385,16 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
 
     What the chosen estimator, controller and SLAM method need of the scenario is their own
     check (:func:`usvdrake.diagrams.check_scenario` runs both)."""
+    if len(s.model_error) != 6 or any(f <= 0 for f in s.model_error):  # NaN: check_numbers
+        raise ConfigError(
+            file, "model_error", "6 positive factors on [m11 m22 m33 Xu Yv Nr]", repr(s.model_error)
+        )
+    check_numbers(s, file)
     vessel_path = Path(s.vessel)
-    if (
-        vessel_path.suffix not in (".yaml", ".yml")
-        and not (VESSEL_DIR / f"{s.vessel}.yaml").is_file()
-    ):
+    if vessel_path.suffix in (".yaml", ".yml"):
+        if not vessel_path.is_file():
+            raise ConfigError(file, "vessel", "an existing vessel YAML file", repr(s.vessel))
+    elif not (is_plain_name(s.vessel) and (VESSEL_DIR / f"{s.vessel}.yaml").is_file()):
         raise ConfigError(
             file, "vessel", "one of " + ", ".join(available_vessels()), repr(s.vessel)
         )
@@ -293,10 +403,6 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
     if len(s.initial_state) != 6:
         raise ConfigError(
             file, "initial_state", "6 numbers [x y psi u v r]", f"{len(s.initial_state)} numbers"
-        )
-    if len(s.model_error) != 6 or not all(f > 0 for f in s.model_error):
-        raise ConfigError(
-            file, "model_error", "6 positive factors on [m11 m22 m33 Xu Yv Nr]", repr(s.model_error)
         )
     if s.nmpc.solver not in ("clarabel", "osqp"):
         raise ConfigError(file, "nmpc.solver", "'clarabel' or 'osqp'", repr(s.nmpc.solver))
@@ -315,18 +421,6 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
     for i, wp in enumerate(s.mission.waypoints):
         if len(wp) != 2:
             raise ConfigError(file, f"mission.waypoints[{i}]", "[x, y]", f"{len(wp)} numbers")
-    for key in POSITIVE_KEYS:
-        _positive(file, key, get_dotted(s, key))
-    for key in NON_NEGATIVE_KEYS:
-        if get_dotted(s, key) < 0:
-            raise ConfigError(file, key, "a number >= 0", repr(get_dotted(s, key)))
-    if s.environment.waves.components < 1:
-        raise ConfigError(
-            file,
-            "environment.waves.components",
-            "an integer >= 1",
-            repr(s.environment.waves.components),
-        )
     integrators = (
         "runge_kutta2",
         "runge_kutta3",

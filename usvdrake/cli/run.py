@@ -2,9 +2,11 @@
 
 import sys
 import time
+from pathlib import Path
 
 from usvdrake.cli._format import num
 from usvdrake.diagrams import load_scenario, with_overrides
+from usvdrake.errors import ConfigError
 from usvdrake.run.fleet import fleet_summary
 from usvdrake.run.mission import run_mission
 from usvdrake.run.simulate import make_meshcat
@@ -110,6 +112,8 @@ def add_arguments(r) -> None:
 
 def run(args) -> int:
     scenario = with_overrides(load_scenario(args.scenario), duration=args.duration, seed=args.seed)
+    if Path(args.out).exists() and not Path(args.out).is_dir():
+        raise ConfigError("command line", "--out", "a folder or a new path", f"a file {args.out}")
     meshcat = None
     if args.meshcat:
         meshcat = make_meshcat(args.port)
