@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint format bench clean
+.PHONY: demo test lint format bench clean foxglove-schemas
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -28,7 +28,21 @@ format: $(STAMP)
 # file each (--dist loadfile keeps a file's module fixtures in one process); on this 2-core
 # machine 2 jobs take the suite from 910 s to 483 s. `make test TEST_JOBS=0`: one process.
 TEST_JOBS ?= 2
-test: lint
+# Foxglove's published JSON schemas (npm @foxglove/schemas), one file per message, for the test
+# that validates our mission logs against them; skipped quietly where npm is missing.
+FOXGLOVE := $(VENV)/foxglove-schemas
+export FOXGLOVE_DUMP := const s = require("@foxglove/schemas/jsonschema"), fs = require("fs"); for (const [k, v] of Object.entries(s)) fs.writeFileSync(process.argv[1] + "/" + k + ".json", JSON.stringify(v));
+$(FOXGLOVE)/.done: | $(STAMP)
+	@if command -v npm >/dev/null 2>&1; then \
+	  npm install --prefix $(VENV)/npm --no-audit --no-fund --silent @foxglove/schemas@2.1.0 && \
+	  mkdir -p $(FOXGLOVE) && \
+	  (cd $(VENV)/npm && node -e "$$FOXGLOVE_DUMP" $(abspath $(FOXGLOVE))) && touch $@ || \
+	  echo "could not install @foxglove/schemas: the Foxglove schema test will skip"; \
+	else echo "npm not found: the Foxglove schema test will skip"; fi
+
+foxglove-schemas: $(FOXGLOVE)/.done
+
+test: lint foxglove-schemas
 	USVDRAKE_QUICK=1 $(BIN)/python -m pytest -q -n $(TEST_JOBS) --dist loadfile tests --nbmake notebooks
 
 bench: $(STAMP)

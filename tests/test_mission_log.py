@@ -324,7 +324,9 @@ def test_add_mission_recorder_records_what_the_system_has(tmp_path):
         simulator.AdvanceTo(1.0)
     s = log_summary(log)
     counts = {topic: c["messages"] for topic, c in s["topics"].items()}
-    # vectors at 5 Hz from t = 0; each sensor message once (the t = 1.0 one is not out yet)
+    # vectors at 5 Hz from t = 0; each sensor message once (the t = 1.0 one is not out yet);
+    # without ground truth, Foxglove's world → base_link (/tf) and /vessel_pose are the estimate
+    # (no sensor systems or vessel plant in this diagram: no static frames, no hull)
     assert counts == {
         "/state_estimate": 6,
         "/thruster_command": 6,
@@ -332,7 +334,10 @@ def test_add_mission_recorder_records_what_the_system_has(tmp_path):
         "/gps": 6,
         "/gps/no_fix": 4,
         "/imu": 10,
+        "/tf": 6,
+        "/vessel_pose": 6,
     }
+    assert recorder.tf_port == "state_estimate" and recorder.frames == {}
     scans = read_log_scans(log)
     np.testing.assert_allclose([r.timestamp for r in scans], 0.1 * np.arange(10), atol=1e-9)
     imu = [m for topic, _, m in read_mission_log(log, ["/imu"])]

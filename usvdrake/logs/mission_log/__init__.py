@@ -10,7 +10,17 @@ Map panels draw the ``foxglove.*`` ones, its Plot panel plots any numeric field 
 (``/ground_truth.x``, ``/thruster_command.thruster_2``, ``/imu.angular_velocity.z``). Besides
 the fields their schema requires, messages carry ``t`` [s] (the time as a plain number, for
 plotting) and whatever the ``foxglove.*`` schema lacks to restore our own message exactly (JSON
-Schema allows extra properties).
+Schema allows extra properties). Every ``foxglove.*`` message is valid against Foxglove's
+published JSON Schema (``tests/test_foxglove_log.py`` checks it against ``@foxglove/schemas``,
+which ``make test`` installs from npm); the channels are registered with our own schemas of
+what we write, under Foxglove's names.
+
+Foxglove's 3D panel: ``/tf`` connects the frames ``world`` → ``base_link`` → ``lidar``,
+``lidar3d``, ``imu``, ``gps`` (the frame ids the sensor messages carry; a sensor frame is
+there when the recorder knows its mount — :func:`add_mission_recorder` takes them from the
+simulated sensors; a hardware log has ``world`` → ``base_link`` only), ``/vessel_pose`` and
+``/vessel_hull`` draw the boat, ``/lidar_points_foxglove`` the 3D sweeps (a copy of a sweep
+every second, not every sweep: ~0.4 MB each against ~20 kB as a range image).
 
 ================== ======================= ====================================================
 default topic      schema                  message
@@ -23,7 +33,20 @@ default topic      schema                  message
 /pose_measurement                          psi, r``); the schema lists the names in order
 /reference
 /slam_pose         foxglove.PoseInFrame    ``timestamp``, ``frame_id`` ("world"), ``pose``
-                                           (yaw-only quaternion), plus ``t, x, y, psi``
+/vessel_pose                               (yaw-only quaternion), plus ``t, x, y, psi``;
+                                           ``/vessel_pose``: the pose of ``/tf``'s world →
+                                           base_link, at the same times
+/tf                foxglove.FrameTransform ``timestamp``, ``parent_frame_id``,
+                                           ``child_frame_id``, ``translation``, ``rotation``
+                                           (yaw-only): world → base_link at the recorder's
+                                           rate from the ground truth (without it: the state
+                                           estimate); once at the start, base_link → each
+                                           sensor frame (the mount [x y z yaw]: lidar,
+                                           lidar3d, imu at its lever arm, gps at its antenna
+                                           height)
+/vessel_hull       foxglove.SceneUpdate    once at the start: one entity ``hull`` (frame
+                                           base_link, ``frame_locked``, lifetime 0) with one
+                                           cube of the hull's length × beam × height
 /lidar_scan        foxglove.LaserScan      ``timestamp``, ``frame_id`` ("lidar"), ``pose``
                                            (identity), ``start_angle``, ``end_angle``,
                                            ``ranges`` [m] (no return: **0**; JSON has no inf),
@@ -43,7 +66,8 @@ default topic      schema                  message
                                            "orientation": {x, y, z, w}}`` (body frame)
 /lidar_points      usvdrake.RangeImage     message encoding ``usvdrake/range-image-v1`` (not
                                            JSON: a VLP-16 sweep is 16 × 1800 ranges at 10 Hz):
-                                           a JSON header ``{"t", "timestamp", "frame_id",
+                                           a JSON header ``{"t", "timestamp", "frame_id"
+                                           ("lidar3d"; "lidar" in earlier logs),
                                            "sweep_time", "motion_applied", "rings", "columns",
                                            "elevations", "azimuth_start", "azimuth_step",
                                            "column_time_start", "column_time_step",
@@ -55,6 +79,13 @@ default topic      schema                  message
                                            byte planes, zlib; decoded by
                                            :func:`decode_cloud` (points on the nominal beam
                                            directions). The schema describes the header
+/lidar_points_     foxglove.PointCloud     at most one sweep a second (``cloud_preview_hz``):
+foxglove                                   ``timestamp``, ``frame_id`` ("lidar3d"), ``pose``
+                                           (identity), ``point_stride`` 16, ``fields`` x, y,
+                                           z, time (float32; time [s] from the sweep's
+                                           start), ``data`` (base64): the valid returns in the
+                                           sensor frame. For Foxglove only: our readers
+                                           decode ``/lidar_points``
 ================== ======================= ====================================================
 
 Times: a message's log time is the time it describes — the sample time for vectors, the
@@ -71,20 +102,24 @@ still read: :func:`read_mission_log` streams the records and stops at the first 
 :func:`log_summary` says whether the footer is there.
 
 API: :class:`MissionLogWriter` (``write_state``, ``write_vector``, ``write_pose``,
-``write_scan``, ``write_gps``, ``write_imu``, ``write_cloud``; ``flush``, ``close``);
+``write_scan``, ``write_gps``, ``write_imu``, ``write_cloud``, ``write_transform``,
+``write_hull``, ``write_point_cloud``; ``flush``, ``close``);
 :class:`MissionRecorder`, a LeafSystem writing a list of :class:`RecordedPort` with publish
 events; :func:`add_mission_recorder` (what ``run_mission`` and the hardware-in-the-loop runner
-call: records whichever of :data:`MISSION_PORTS` a system has); :func:`read_mission_log`,
+call: records whichever of :data:`MISSION_PORTS` a system has, with the sensor frames and hull
+of :func:`sensor_frames` and :func:`hull_size`); :func:`read_mission_log`,
 :func:`read_log_scans`, :func:`read_log_states`, :func:`read_log_vectors`, :func:`log_summary`.
 
 Logs written before this encoding (``usvdrake/state-v1``, ``usvdrake/laserscan-v1``) are still
-read by the same functions.
+read by the same functions; so are logs without the Foxglove-only channels (they are never
+needed to read a log back).
 
 The package's modules, lowest first (each imports only those before it): ``schema`` (encoding
-and schema names, JSON Schemas), ``codecs`` (message encoders and decoders, the range-image
-cloud codec), ``writer`` (:class:`MissionLogWriter`), ``reader`` (:func:`read_mission_log`,
-:func:`log_summary`, ``read_log_*``), ``recorder`` (:class:`MissionRecorder`,
-:func:`add_mission_recorder`). This module re-exports the names used elsewhere.
+and schema names, JSON Schemas, Foxglove's official ones), ``codecs`` (message encoders and
+decoders, the range-image cloud codec), ``writer`` (:class:`MissionLogWriter`), ``reader``
+(:func:`read_mission_log`, :func:`log_summary`, ``read_log_*``), ``recorder``
+(:class:`MissionRecorder`, :func:`add_mission_recorder`). This module re-exports the names used
+elsewhere.
 """
 
 from usvdrake.logs.mission_log.codecs import (
@@ -107,6 +142,8 @@ from usvdrake.logs.mission_log.recorder import (
     MissionRecorder,
     RecordedPort,
     add_mission_recorder,
+    hull_size,
+    sensor_frames,
 )
 from usvdrake.logs.mission_log.schema import CLOUD_ENCODING, CLOUD_SCHEMA
 from usvdrake.logs.mission_log.writer import MissionLogWriter
@@ -124,10 +161,12 @@ __all__ = [
     "decode_scan",
     "encode_cloud",
     "encode_scan",
+    "hull_size",
     "log_summary",
     "quantise_ranges",
     "read_log_scans",
     "read_log_states",
     "read_log_vectors",
     "read_mission_log",
+    "sensor_frames",
 ]

@@ -7,6 +7,7 @@ binary ``usvdrake/range-image-v1`` codec of 3D lidar sweeps (:func:`encode_cloud
 image), with its range quantum and limits. Also the shared helpers (log times in ns,
 ``{sec, nsec}`` stamps, compact JSON) the writer uses."""
 
+import base64
 import json
 import math
 import zlib
@@ -88,6 +89,93 @@ def encode_scan(scan: LaserScan, frame_id: str = "lidar") -> bytes:
             "time_increment": float(scan.time_increment),
         }
     )
+
+
+def encode_frame_transform(
+    t: float, parent: str, child: str, x: float, y: float, z: float, yaw: float
+) -> bytes:
+    """``foxglove.FrameTransform`` JSON: ``child`` at (x, y, z) [m], rotated by ``yaw`` [rad]
+    about z, in ``parent``."""
+    return _json(
+        {
+            "timestamp": _stamp(t),
+            "parent_frame_id": parent,
+            "child_frame_id": child,
+            "translation": {"x": float(x), "y": float(y), "z": float(z)},
+            "rotation": _yaw_quaternion(float(yaw)),
+        }
+    )
+
+
+def encode_hull_scene(
+    t: float, length: float, beam: float, height: float, frame_id: str = "base_link"
+) -> bytes:
+    """``foxglove.SceneUpdate`` JSON: the hull as one cube entity (``hull``) of length × beam ×
+    height [m] centred on ``frame_id`` (which it follows: ``frame_locked``), kept until
+    replaced (``lifetime`` 0)."""
+    cube = {
+        "pose": {
+            "position": {"x": 0.0, "y": 0.0, "z": 0.0},
+            "orientation": _yaw_quaternion(0.0),
+        },
+        "size": {"x": float(length), "y": float(beam), "z": float(height)},
+        "color": {"r": 0.95, "g": 0.55, "b": 0.1, "a": 0.8},
+    }
+    entity = {
+        "timestamp": _stamp(t),
+        "frame_id": frame_id,
+        "id": "hull",
+        "lifetime": {"sec": 0, "nsec": 0},
+        "frame_locked": True,
+        "metadata": [],
+        "arrows": [],
+        "cubes": [cube],
+        "spheres": [],
+        "cylinders": [],
+        "lines": [],
+        "triangles": [],
+        "texts": [],
+        "models": [],
+    }
+    return _json({"deletions": [], "entities": [entity]})
+
+
+_FLOAT32 = 7  # foxglove.NumericType
+
+
+def encode_point_cloud(cloud: PointCloud, frame_id: str = "lidar3d") -> bytes:
+    """``foxglove.PointCloud`` JSON of a sweep's valid returns: little-endian float32 ``x, y,
+    z`` [m] (sensor frame) and ``time`` [s from the sweep's start], 16 bytes a point, base64."""
+    pts = np.asarray(cloud.points, float).reshape(-1, 3)
+    pt = np.asarray(cloud.point_time, float)
+    packed = np.zeros((len(pts), 4), "<f4")
+    packed[:, :3] = pts
+    if len(pt) == len(pts):
+        packed[:, 3] = pt
+    fields = [
+        {"name": name, "offset": 4 * i, "type": _FLOAT32}
+        for i, name in enumerate(("x", "y", "z", "time"))
+    ]
+    return _json(
+        {
+            "timestamp": _stamp(cloud.time),
+            "frame_id": frame_id,
+            "pose": {
+                "position": {"x": 0.0, "y": 0.0, "z": 0.0},
+                "orientation": _yaw_quaternion(0.0),
+            },
+            "point_stride": 16,
+            "fields": fields,
+            "data": base64.b64encode(packed.tobytes()).decode(),
+        }
+    )
+
+
+def decode_point_cloud(data: bytes) -> np.ndarray:
+    """The points (n × 4: x, y, z, time) of an :func:`encode_point_cloud` message."""
+    m = json.loads(data)
+    raw = np.frombuffer(base64.b64decode(m["data"]), "<f4")
+    return raw.reshape(-1, 4).astype(float)
 
 
 def _decode_scan_v1(data: bytes) -> LaserScan:

@@ -3,17 +3,34 @@ its port, topic, kind and rate), :class:`MissionRecorder` (a LeafSystem that wri
 inputs periodically and each new sensor message once, with publish events, to a
 :class:`~usvdrake.logs.mission_log.writer.MissionLogWriter`), :data:`MISSION_PORTS` (what a
 vessel or hardware-in-the-loop diagram is recorded by default), :func:`mission_ports` and
-:func:`add_mission_recorder` (what ``run_mission`` and the hardware-in-the-loop runner call)."""
+:func:`add_mission_recorder` (what ``run_mission`` and the hardware-in-the-loop runner call),
+with :func:`sensor_frames` and :func:`hull_size`, what it learns of the vessel's sensor mounts
+and hull from the diagram for Foxglove's 3D panel (``/tf``, ``/vessel_hull``)."""
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import LeafSystem, PortDataType
+from pydrake.systems.framework import Diagram, LeafSystem, PortDataType
 
 from usvdrake.logs.mission_log.writer import MissionLogWriter, vector_names
+from usvdrake.sensors.gps import Gps
+from usvdrake.sensors.imu import Imu
+from usvdrake.sensors.lidar2d import Lidar2D
+from usvdrake.sensors.lidar3d import Lidar3D
 from usvdrake.sensors.messages import GpsFix, ImuSample, LaserScan, PointCloud
+from usvdrake.vessel import VesselParams
+
+# --- Foxglove's 3D panel: frames, topics ------------------------------------------------------
+WORLD_FRAME = "world"
+BODY_FRAME = "base_link"
+TF_TOPIC = "/tf"
+VESSEL_POSE_TOPIC = "/vessel_pose"
+HULL_TOPIC = "/vessel_hull"
+FOXGLOVE_CLOUD_SUFFIX = "_foxglove"  # /lidar_points → /lidar_points_foxglove
+# the recorded state the vessel's pose (world → base_link) is taken from, in order of preference
+TF_SOURCES = ("ground_truth_state", "state_estimate")
 
 # --- the recorder system ----------------------------------------------------------------------
 KINDS = ("state", "vector", "pose", "scan", "gps", "imu", "cloud")
@@ -109,6 +126,17 @@ class MissionRecorder(LeafSystem):
     Without ``ports`` (the first version's ``MissionRecorder(writer, rate_hz=...,
     scan_period=...)``) it records ``ground_truth_state`` and, with a ``scan_period``,
     ``lidar_scan``.
+
+    For Foxglove's 3D panel it also writes, each time it samples the state port ``tf_port``
+    (default: the first of :data:`TF_SOURCES` among its ``state`` ports; None: none), the
+    transform world → base_link on ``/tf`` (``foxglove.FrameTransform``) and the pose on
+    ``/vessel_pose`` (``foxglove.PoseInFrame``); once at the start the static transforms
+    base_link → each of ``frames`` ({frame_id: [x y z yaw]} [m, rad], the sensor mounts) on
+    ``/tf`` and, given ``hull`` = (length, beam, height) [m], the hull as a cube on
+    ``/vessel_hull`` (``foxglove.SceneUpdate``); and each sweep of a ``cloud`` port also as a
+    ``foxglove.PointCloud`` on ``<topic>_foxglove``, at most ``cloud_preview_hz`` sweeps a
+    second (a sweep is ~0.4 MB there against ~20 kB as a range image; None: every sweep, 0:
+    none).
     """
 
     def __init__(
@@ -117,6 +145,11 @@ class MissionRecorder(LeafSystem):
         ports: Sequence[RecordedPort] | None = None,
         rate_hz: float = 10.0,
         scan_period: float | None = None,
+        *,
+        frames: Mapping[str, Sequence[float]] | None = None,
+        hull: Sequence[float] | None = None,
+        tf_port: str | None = "auto",
+        cloud_preview_hz: float | None = 1.0,
     ):
         super().__init__()
         if ports is None:
@@ -124,6 +157,23 @@ class MissionRecorder(LeafSystem):
         self._writer = writer
         self._ports = list(ports)
         self._last: dict[str, tuple] = {}
+        self._frames = {str(k): [float(v) for v in m] for k, m in (frames or {}).items()}
+        for frame, mount in self._frames.items():
+            if len(mount) != 4:
+                raise ValueError(f"MissionRecorder: frame {frame!r} mount is not [x y z yaw]")
+        self._hull = None if hull is None else tuple(float(v) for v in hull)
+        if self._hull is not None and len(self._hull) != 3:
+            raise ValueError("MissionRecorder: hull is (length, beam, height)")
+        states = [p.port for p in self._ports if p.kind == "state"]
+        if tf_port == "auto":
+            tf_port = next((s for s in TF_SOURCES if s in states), None)
+        elif tf_port is not None and tf_port not in states:
+            raise ValueError(f"MissionRecorder: tf_port {tf_port!r} is not a recorded state")
+        self._tf_port = tf_port
+        self._cloud_preview_hz = cloud_preview_hz
+        self._last_preview: dict[str, float] = {}
+        if self._frames or self._hull is not None:
+            self.DeclareInitializationPublishEvent(self._write_static)
         if len({p.port for p in self._ports}) != len(self._ports):
             raise ValueError("MissionRecorder: two RecordedPorts share an input port name")
         per_step = []
@@ -164,6 +214,26 @@ class MissionRecorder(LeafSystem):
     def _publisher(fn, p, port):
         return lambda context: fn(context, p, port)
 
+    @property
+    def frames(self) -> dict[str, list[float]]:
+        """The static sensor frames written to ``/tf``: {frame_id: [x y z yaw]}."""
+        return {k: list(v) for k, v in self._frames.items()}
+
+    @property
+    def tf_port(self) -> str | None:
+        """The state port the world → base_link transform is taken from (None: none)."""
+        return self._tf_port
+
+    def _write_static(self, context) -> None:
+        w = self._writer
+        if w.closed:
+            return
+        t = context.get_time()
+        for frame, mount in self._frames.items():
+            w.write_transform(TF_TOPIC, t, BODY_FRAME, frame, mount)
+        if self._hull is not None:
+            w.write_hull(HULL_TOPIC, t, self._hull, BODY_FRAME)
+
     def _write_vector(self, context, p: RecordedPort, port) -> None:
         w = self._writer
         if w.closed:
@@ -172,6 +242,10 @@ class MissionRecorder(LeafSystem):
         t = context.get_time()
         if p.kind == "state":
             w.write_state(p.topic, t, v)
+            if p.port == self._tf_port:
+                x, y, psi = (float(c) for c in v[:3])
+                w.write_transform(TF_TOPIC, t, WORLD_FRAME, BODY_FRAME, (x, y, 0.0, psi))
+                w.write_pose(VESSEL_POSE_TOPIC, t, v, WORLD_FRAME)
         elif p.kind == "pose":
             w.write_pose(p.topic, t, v, p.frame_id or "world")
         else:
@@ -194,9 +268,23 @@ class MissionRecorder(LeafSystem):
         elif p.kind == "gps":
             w.write_gps(p.topic, msg, p.frame_id or "gps", context.get_time())
         elif p.kind == "cloud":
-            w.write_cloud(p.topic, msg, p.frame_id or "lidar", context.get_time())
+            frame = p.frame_id or "lidar3d"
+            w.write_cloud(p.topic, msg, frame, context.get_time())
+            if self._preview_due(p.port, msg.time):
+                topic = p.topic + FOXGLOVE_CLOUD_SUFFIX
+                w.write_point_cloud(topic, msg, frame, context.get_time())
         else:
             w.write_imu(p.topic, msg, p.frame_id or "imu", context.get_time())
+
+    def _preview_due(self, port: str, t: float) -> bool:
+        hz = self._cloud_preview_hz
+        if hz is not None and hz <= 0:
+            return False
+        last = self._last_preview.get(port)
+        if hz is not None and last is not None and t - last < 1.0 / hz - 1e-9:
+            return False
+        self._last_preview[port] = t
+        return True
 
 
 # What :func:`add_mission_recorder` records of a vessel (or hardware-in-the-loop) diagram, when
@@ -246,6 +334,49 @@ def mission_ports(system, extra: Sequence[RecordedPort] = ()) -> list[RecordedPo
     return out
 
 
+def _subsystems(system):
+    yield system
+    if isinstance(system, Diagram):
+        for s in system.GetSystems():
+            yield from _subsystems(s)
+
+
+# the frame of each sensor system (the recorder's default frame_id of the port it feeds)
+_SENSOR_FRAMES = ((Lidar2D, "lidar"), (Lidar3D, "lidar3d"), (Imu, "imu"), (Gps, "gps"))
+
+
+def sensor_frames(system) -> dict[str, list[float]]:
+    """{frame_id: [x y z yaw] in base_link [m, rad]} of the simulated sensors in ``system``
+    (searched through nested diagrams): ``lidar`` / ``lidar3d`` at their ``mount``, ``imu`` at
+    its lever arm, ``gps`` at its antenna height. Empty for a hardware station (its devices
+    do not know their mounts)."""
+    out: dict[str, list[float]] = {}
+    for s in _subsystems(system):
+        for cls, frame in _SENSOR_FRAMES:
+            if not isinstance(s, cls) or frame in out:
+                continue
+            cfg = s.model.cfg
+            if frame == "imu":
+                lx, ly = (float(v) for v in cfg.lever_arm[:2])
+                out[frame] = [lx, ly, 0.0, 0.0]
+            elif frame == "gps":
+                out[frame] = [0.0, 0.0, float(cfg.antenna_height), 0.0]
+            else:
+                out[frame] = [float(v) for v in cfg.mount]
+    return out
+
+
+def hull_size(system) -> tuple[float, float, float] | None:
+    """(length, beam, height) [m] of the first vessel plant (a system with ``params``, a
+    :class:`~usvdrake.vessel.VesselParams`) in ``system``; None if there is none."""
+    for s in _subsystems(system):
+        params = getattr(s, "params", None)
+        if isinstance(params, VesselParams):
+            h = params.hull
+            return (float(h.length), float(h.beam), float(h.height))
+    return None
+
+
 def add_mission_recorder(
     builder,
     system,
@@ -253,14 +384,35 @@ def add_mission_recorder(
     rate_hz: float = 10.0,
     extra: Sequence[RecordedPort] = (),
     name: str = "mission_recorder",
+    *,
+    frames: Mapping[str, Sequence[float]] | None = None,
+    hull: Sequence[float] | None = None,
+    cloud_preview_hz: float | None = 1.0,
 ) -> MissionRecorder:
     """Add a :class:`MissionRecorder` to ``builder`` recording whichever of
     :data:`MISSION_PORTS` ``system`` (already in ``builder``) has as outputs — ground truth in
     simulation, inputs (sensor messages, measured thrust), outputs (thruster command, applied
     thrust) and estimates (state estimate, SLAM pose) — plus ``extra`` ports of ``system``,
-    vectors at ``rate_hz``. Connects it and returns it."""
+    vectors at ``rate_hz``. Connects it and returns it.
+
+    Foxglove's 3D panel: ``frames`` (sensor mounts, {frame_id: [x y z yaw]}) and ``hull``
+    ((length, beam, height) [m]) default to what ``system`` holds (:func:`sensor_frames`,
+    :func:`hull_size`); pass ``{}`` / ``()`` for none. ``cloud_preview_hz``: see
+    :class:`MissionRecorder`."""
     ports = mission_ports(system, extra)
-    recorder = builder.AddNamedSystem(name, MissionRecorder(writer, ports, rate_hz))
+    frames = sensor_frames(system) if frames is None else frames
+    hull = hull_size(system) if hull is None else (tuple(hull) or None)
+    recorder = builder.AddNamedSystem(
+        name,
+        MissionRecorder(
+            writer,
+            ports,
+            rate_hz,
+            frames=frames,
+            hull=hull,
+            cloud_preview_hz=cloud_preview_hz,
+        ),
+    )
     for p in ports:
         builder.Connect(system.GetOutputPort(p.port), recorder.GetInputPort(p.port))
     return recorder

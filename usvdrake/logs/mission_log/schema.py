@@ -4,8 +4,9 @@
 the state's field names, and one function per schema returning the JSON Schema a channel is
 registered with (:func:`state_schema`, :func:`vector_schema`, :func:`pose_schema`,
 :func:`scan_schema`, :func:`gps_schema`, :func:`no_fix_schema`, :func:`imu_schema`, and
-:func:`cloud_schema`, the header of a range-image message). See the package docstring for the
-table of topics, schemas and messages."""
+:func:`cloud_schema`, the header of a range-image message), and the Foxglove-only channels'
+(:func:`frame_transform_schema`, :func:`scene_update_schema`, :func:`point_cloud_schema`). See
+the package docstring for the table of topics, schemas and messages."""
 
 from collections.abc import Sequence
 
@@ -24,7 +25,10 @@ IMU_SCHEMA = "usvdrake.Imu"
 CLOUD_SCHEMA = "usvdrake.RangeImage"
 CLOUD_ENCODING = "usvdrake/range-image-v1"  # binary: JSON header, newline, zlib body
 CLOUD_FILTER = "delta-byteplanes"  # how the codes are laid out before zlib (see cloud_schema)
-
+# Foxglove-only channels (the 3D panel's transform tree, vessel and cloud), official schemas
+FRAME_TRANSFORM_SCHEMA = "foxglove.FrameTransform"
+SCENE_UPDATE_SCHEMA = "foxglove.SceneUpdate"
+POINT_CLOUD_SCHEMA = "foxglove.PointCloud"
 # --- JSON schemas -----------------------------------------------------------------------------
 _NUM = {"type": "number"}
 _TIME = {
@@ -220,4 +224,76 @@ def cloud_schema() -> dict:
         "stored as all high bytes then all low bytes): range = code * range_step [m], "
         "0xFFFF = no return. Azimuths [rad] / column times [s] are start + step * column, "
         "or listed when not evenly spaced",
+    )
+
+
+# --- the Foxglove-only channels: our own JSON Schemas of what we write, under Foxglove's names
+# (Foxglove picks the panel by the schema name; tests/test_foxglove_log.py validates every
+# message against Foxglove's published schemas, which make test installs from npm)
+_POSE = {
+    "type": "object",
+    "properties": {"position": _VEC3, "orientation": _QUAT},
+    "required": ["position", "orientation"],
+}
+
+
+def _message(title: str, properties: dict, required=None) -> dict:
+    return {
+        "title": title,
+        "type": "object",
+        "properties": properties,
+        "required": list(required if required is not None else properties),
+    }
+
+
+def frame_transform_schema() -> dict:
+    return _message(
+        FRAME_TRANSFORM_SCHEMA,
+        {
+            "timestamp": _TIME,
+            "parent_frame_id": {"type": "string"},
+            "child_frame_id": {"type": "string"},
+            "translation": _VEC3,
+            "rotation": _QUAT,
+        },
+    )
+
+
+def scene_update_schema() -> dict:
+    color = _message("foxglove.Color", {k: _NUM for k in "rgba"})
+    cube = _message("foxglove.CubePrimitive", {"pose": _POSE, "size": _VEC3, "color": color})
+    lists = ("metadata", "arrows", "spheres", "cylinders", "lines", "triangles", "texts", "models")
+    entity = _message(
+        "foxglove.SceneEntity",
+        {
+            "timestamp": _TIME,
+            "frame_id": {"type": "string"},
+            "id": {"type": "string"},
+            "lifetime": _TIME,
+            "frame_locked": {"type": "boolean"},
+            "cubes": {"type": "array", "items": cube},
+            **{k: {"type": "array"} for k in lists},
+        },
+    )
+    return _message(
+        SCENE_UPDATE_SCHEMA,
+        {"deletions": {"type": "array"}, "entities": {"type": "array", "items": entity}},
+    )
+
+
+def point_cloud_schema() -> dict:
+    field = _message(
+        "foxglove.PackedElementField",
+        {"name": {"type": "string"}, "offset": {"type": "integer"}, "type": {"type": "integer"}},
+    )
+    return _message(
+        POINT_CLOUD_SCHEMA,
+        {
+            "timestamp": _TIME,
+            "frame_id": {"type": "string"},
+            "pose": _POSE,
+            "point_stride": {"type": "integer", "minimum": 0},
+            "fields": {"type": "array", "items": field},
+            "data": {"type": "string", "contentEncoding": "base64"},
+        },
     )

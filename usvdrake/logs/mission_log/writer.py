@@ -17,8 +17,11 @@ from usvdrake.logs.mission_log.codecs import (
     _json,
     _ns,
     encode_cloud,
+    encode_frame_transform,
     encode_gps,
+    encode_hull_scene,
     encode_imu,
+    encode_point_cloud,
     encode_pose,
     encode_scan,
     encode_state,
@@ -27,11 +30,14 @@ from usvdrake.logs.mission_log.codecs import (
 from usvdrake.logs.mission_log.schema import (
     CLOUD_ENCODING,
     cloud_schema,
+    frame_transform_schema,
     gps_schema,
     imu_schema,
     no_fix_schema,
+    point_cloud_schema,
     pose_schema,
     scan_schema,
+    scene_update_schema,
     state_schema,
     vector_schema,
 )
@@ -178,6 +184,47 @@ class MissionLogWriter:
         """One sweep as a ``usvdrake/range-image-v1`` message (:func:`encode_cloud`)."""
         ch = self.channel(topic, cloud_schema(), CLOUD_ENCODING)
         self.write(ch, cloud.time, encode_cloud(cloud, frame_id), publish_time)
+
+    def write_transform(
+        self,
+        topic: str,
+        t: float,
+        parent: str,
+        child: str,
+        mount,
+        publish_time: float | None = None,
+    ) -> None:
+        """A ``foxglove.FrameTransform``: ``child`` at ``mount`` = [x y z yaw] [m, rad] in
+        ``parent``."""
+        x, y, z, yaw = (float(v) for v in mount)
+        ch = self.channel(topic, frame_transform_schema())
+        self.write(ch, t, encode_frame_transform(t, parent, child, x, y, z, yaw), publish_time)
+
+    def write_hull(
+        self,
+        topic: str,
+        t: float,
+        size,
+        frame_id: str = "base_link",
+        publish_time: float | None = None,
+    ) -> None:
+        """A ``foxglove.SceneUpdate`` drawing the hull, ``size`` = (length, beam, height) [m],
+        as a cube on ``frame_id``."""
+        length, beam, height = (float(v) for v in size)
+        ch = self.channel(topic, scene_update_schema())
+        self.write(ch, t, encode_hull_scene(t, length, beam, height, frame_id), publish_time)
+
+    def write_point_cloud(
+        self,
+        topic: str,
+        cloud: PointCloud,
+        frame_id: str = "lidar3d",
+        publish_time: float | None = None,
+    ) -> None:
+        """One sweep's returns as a ``foxglove.PointCloud`` (JSON, :func:`encode_point_cloud`),
+        for Foxglove's 3D panel; our readers use the range image (:meth:`write_cloud`)."""
+        ch = self.channel(topic, point_cloud_schema())
+        self.write(ch, cloud.time, encode_point_cloud(cloud, frame_id), publish_time)
 
     # flushing and closing
     def _flush_locked(self, now: float | None = None) -> None:
