@@ -113,3 +113,14 @@ def test_corrected_scans_are_found_in_the_raw_log_by_their_ranges():
     # the same scan twice (a robot at rest) pairs with the copies in order
     twice = raw[:5] + [raw[2]] + raw[5:]
     assert list(associate_scans(twice, [raw[2], raw[3], raw[2]])) == [2, 3, 5]
+
+
+def test_a_flaser_line_without_beams_is_skipped_not_divided_by(tmp_path):
+    """``FLASER 0 ...`` (no beams) used to divide by zero in the beam increment."""
+    from usvdrake.logs.carmen import read_carmen
+
+    good = "FLASER 4 1.0 2.0 3.0 4.0 0 0 0 0 0 0 1.5 host 1.5"
+    log = tmp_path / "bad.clf"
+    log.write_text(f"FLASER 0 0 0 0 0 0 0 1.0 host 1.0\n{good}\nFLASER 1 2.0 0 0 0 0 0 0 2.0 h 2\n")
+    scans = list(read_carmen(log))
+    assert [s.timestamp for s in scans] == [1.5]

@@ -62,3 +62,14 @@ def test_usvdrake_metrics_prints_and_writes_the_replayed_metrics(tmp_path, capsy
     replay = json.loads((tmp_path / "again" / "metrics.json").read_text())
     assert replay["path_length_m"] == live["path_length_m"]
     assert main(["metrics", str(tmp_path / "missing")]) == 2
+
+
+def test_slam3d_on_a_log_without_3d_sweeps_is_one_clear_line(tmp_path, capsys):
+    """A 2D-lidar recording: refused in one line, not 0 keyframes and exit 0."""
+    from usvdrake.cli import main
+
+    scenario = with_overrides(load_scenario("basin_rplidar"), duration=3.0)
+    run_mission(scenario, out_dir=tmp_path, record=False)
+    assert main(["slam3d", str(tmp_path / "log.mcap"), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "3D lidar sweeps" in err

@@ -77,6 +77,13 @@ def run(args) -> int:
         imu_topic=args.imu_topic,
         gps_topic=args.gps_topic,
     )
+    if not result.metrics.get("lidar_messages"):
+        raise ConfigError(
+            str(args.log),
+            "",
+            "a recording with 3D lidar sweeps (/lidar_points or a PointCloud2 topic)",
+            "none (a 2D-only log? usvdrake slam2d reads those)",
+        )
     text = json.dumps(result.metrics, indent=2)
     if args.json:
         print(text)

@@ -60,6 +60,8 @@ def parse_flaser(tokens: list[str], pose: str = "odometry", max_range: float = 5
     logs, the corrected pose); max_range [m]: readings ≥ it are no-returns.
     """
     n = int(tokens[1])
+    if n < 2 or len(tokens) < 9 + n:  # a scan needs beams and its pose and time fields
+        raise ValueError(f"FLASER line with {n} beams and {len(tokens)} fields")
     r = np.array(tokens[2 : 2 + n], dtype=float)
     p = np.array(tokens[2 + n : 8 + n], dtype=float)
     timestamp = float(tokens[8 + n])
