@@ -184,7 +184,12 @@ def signals_from_log(path: str | Path) -> dict[str, Signal]:
             row = message["q"]
         else:
             skip = ("t", "timestamp", "frame_id", "pose")
-            row = [v for k, v in message.items() if k not in skip and isinstance(v, int | float)]
+            row = [
+                v
+                for k, v in message.items()
+                if k not in skip and (v is None or isinstance(v, int | float))
+            ]
+        row = [np.nan if v is None else v for v in row]  # null: a non-finite value
         times, values = rows.setdefault(topics[topic], ([], []))
         times.append(message.get("t", t))
         values.append(row)

@@ -34,8 +34,23 @@ def _yaw_quaternion(psi: float) -> dict:
     return {"x": 0.0, "y": 0.0, "z": math.sin(psi / 2), "w": math.cos(psi / 2)}
 
 
+def _null_nonfinite(obj):
+    """``obj`` with NaN and ±inf replaced by None (JSON null): JSON has no such numbers, and a
+    value the simulation survives must not abort its log. Readers turn null back into NaN."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _null_nonfinite(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_null_nonfinite(v) for v in obj]
+    return obj
+
+
 def _json(obj: dict) -> bytes:
-    return json.dumps(obj, separators=(",", ":"), allow_nan=False).encode()
+    try:  # the common case: every number finite
+        return json.dumps(obj, separators=(",", ":"), allow_nan=False).encode()
+    except ValueError:
+        return json.dumps(_null_nonfinite(obj), separators=(",", ":"), allow_nan=False).encode()
 
 
 def _finite(v: float) -> float:

@@ -6,6 +6,7 @@ counts, times, whether the footer is there) without decoding it; :func:`read_log
 and arrays."""
 
 import json
+import math
 import struct
 from collections.abc import Iterator, Sequence
 from pathlib import Path
@@ -147,8 +148,13 @@ def read_log_scans(path: str | Path, topic: str = "/lidar_scan") -> list[BagScan
     ]
 
 
+def _number(v) -> float:
+    """A logged number; null (a non-finite value the writer could not put in JSON) is NaN."""
+    return math.nan if v is None else v
+
+
 def _state_row(m: dict) -> list[float]:
-    return list(m["q"]) if "q" in m else [m[k] for k in STATE_NAMES]
+    return [_number(v) for v in m["q"]] if "q" in m else [_number(m[k]) for k in STATE_NAMES]
 
 
 def read_log_states(
@@ -167,11 +173,13 @@ def read_log_vectors(path: str | Path, topic: str) -> tuple[np.ndarray, np.ndarr
         if not isinstance(m, dict):
             raise TypeError(f"{topic} holds {type(m).__name__} messages, not vectors")
         if "q" in m:  # state-v1
-            m = {"t": m["t"], **dict(zip(STATE_NAMES, m["q"], strict=True))}
+            m = {"t": m["t"], **dict(zip(STATE_NAMES, _state_row(m), strict=True))}
         if names is None:
             skip = {"t", "timestamp", "frame_id", "pose"}
-            names = [k for k in m if k not in skip and isinstance(m[k], int | float)]
+            names = [
+                k for k in m if k not in skip and (m[k] is None or isinstance(m[k], int | float))
+            ]
         times.append(t)
-        rows.append([m[k] for k in names])
+        rows.append([_number(m[k]) for k in names])
     names = names or []
     return np.array(times), np.array(rows, float).reshape(len(times), len(names)), names
