@@ -30,6 +30,9 @@ def test_replay_renders_the_canal_and_the_vessel(tmp_path):
         page.wait_for_timeout(4000)  # let the scene load and the animation start
         png = page.screenshot()
         (tmp_path / "replay.png").write_bytes(png)
+        legend = page.locator("#usv-legend").inner_text()
+        overlay = page.locator("#usv-overlay").bounding_box()
+        clock = page.locator("#usv-clock").inner_text()
         browser.close()
     assert not errors, errors
     img = imread(io.BytesIO(png), format="png")[..., :3]
@@ -39,3 +42,19 @@ def test_replay_renders_the_canal_and_the_vessel(tmp_path):
     water = (b > 0.3) & (b > r + 0.1) & (b > g)
     assert water.mean() > 0.01, f"water covers only {water.mean():.3%} of the view"
     assert len(np.unique((img * 15).astype(int).reshape(-1, 3), axis=0)) > 20
+
+    # the legend overlay explains the drawn lines, and the clock runs with the replay
+    assert "path sailed" in legend and "planned route" in legend and "thrust" in legend, legend
+    assert clock.startswith("t = ") and "speed" in clock and "m/s" in clock, clock
+    x0, y0 = int(overlay["x"]), int(overlay["y"])
+    x1, y1 = x0 + int(overlay["width"]), y0 + int(overlay["height"])
+    assert overlay["width"] > 100 and overlay["height"] > 50
+    panel = img[y0 + 2 : y1 - 2, x0 + 2 : x1 - 2]
+    assert (panel.min(axis=-1) > 0.85).mean() > 0.5, "the legend's light panel is not on screen"
+    # the vessel is in the first frame: the hull's violet (used by nothing else) outside the legend
+    scene = np.ones(img.shape[:2], bool)
+    scene[y0:y1, x0:x1] = False
+    hull = (g < 0.08) & (b > 0.6) & (r > 0.35) & (b > r + 0.1) & scene
+    assert hull.sum() >= 30, f"only {hull.sum()} hull-coloured pixels on screen"
+    # lit like daylight, not Meshcat's dark default scene (mean brightness ~0.14 before)
+    assert img.mean() > 0.35, f"mean brightness {img.mean():.2f}"

@@ -1,6 +1,5 @@
 """The exploration LeafSystems of Ueland 2017 wired on a known map: explorer → planner → setpoint
-law,
-the operator's modes, and the scenario's checks."""
+law, the operator's modes, and the scenario's checks."""
 
 import dataclasses
 

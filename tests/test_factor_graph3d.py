@@ -4,8 +4,7 @@ The scene: a closed rectangular canal around an island (centreline 40 m × 20 m,
 quay walls and pillars, and a bridge near the start. Water gives no lidar returns, so away from
 the bridge the height z is unobservable to the lidar (registration degenerate in z) — the
 vertical drift Roboat II §VI-A reports; the bridge underside makes z observable at the start, which
-is
-where the loop closes. A VLP-16 (16 rings, 900 columns) is ray-cast analytically.
+is where the loop closes. A VLP-16 (16 rings, 900 columns) is ray-cast analytically.
 """
 
 import numpy as np

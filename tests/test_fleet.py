@@ -1,6 +1,5 @@
 """The fleet (Roboat II §III): assignment by path cost, the request ledger, seeing and avoiding
-other
-boats, the coordinator and the fleet diagram."""
+other boats, the coordinator and the fleet diagram."""
 
 import dataclasses
 import json

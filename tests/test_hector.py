@@ -1,6 +1,5 @@
 """Hector SLAM (Kohlbrecher et al. 2011; Ueland 2017) in the NTNU basin with synthetic RPLIDAR
-scans:
-map interpolation against finite differences, the matcher against a known offset, and the
+scans: map interpolation against finite differences, the matcher against a known offset, and the
 whole SLAM loop against the true path, noise-free and with the RPLIDAR's 1 % range noise."""
 
 import numpy as np

@@ -265,10 +265,9 @@ def closed_loop(pose0, setpoint, tau_env=(0.0, 0.0, 0.0), with_bias=True):
 def test_pd_observer_allocation_reach_a_setpoint_3m_away():
     """The full loop (reference model, observer fed the plant's exact pose and the allocated
     force, PD, allocation, mixer) moves the vessel 3 m and holds its heading (Ueland 2017: heading
-    is
-    not planned), with an unknown environmental force and yaw moment switched on at t = 0: on
-    its own, the allocation makes no yaw moment on the round hull, so without it the heading
-    assertion could not fail. Without the bias estimate the yaw moment alone would leave
+    is not planned), with an unknown environmental force and yaw moment switched on at t = 0: on its
+    own, the allocation makes no yaw moment on the round hull, so without it the heading assertion
+    could not fail. Without the bias estimate the yaw moment alone would leave
     0.004/Kp_ψ ≈ 0.015 rad and the force a 9 cm offset."""
     pose0 = np.array([0.5, -0.2, 0.4])
     setpoint = pose0 + np.array([2.4, 1.8, 0.0])  # 3 m away, same heading

@@ -1,7 +1,6 @@
 """The NTNU basin (Ueland 2017) and the natural lakes (Pham et al.): determinism, sizes, closed
-shores, the
-basin's connectivity for the planner's inflated vessel, the sloped wave-generator face, valid
-solids, and the ray-casting budget of a Hokuyo scan in the valley."""
+shores, the basin's connectivity for the planner's inflated vessel, the sloped wave-generator face,
+valid solids, and the ray-casting budget of a Hokuyo scan in the valley."""
 
 import time
 
@@ -96,9 +95,8 @@ def test_basin_size_and_datum():
 @pytest.mark.parametrize("seed", range(4))
 def test_basin_connected_for_the_inflated_vessel(seed):
     """Ueland 2017's planner: the free water eroded by the vessel's radius plus the 0.4 m inflation
-    is
-    one region holding the start and ≥ 95 % of the eroded free cells (the labyrinth, behind
-    the narrow passage, is ~30 %, so a closed passage fails this)."""
+    is one region holding the start and ≥ 95 % of the eroded free cells (the labyrinth, behind the
+    narrow passage, is ~30 %, so a closed passage fails this)."""
     w = ntnu_basin(seed)
     grid = w.occupancy(0.1)
     r = int(round((VESSEL_RADIUS + INFLATION) / grid.resolution))

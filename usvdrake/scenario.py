@@ -94,11 +94,11 @@ class SensorsConfig:
 @dataclass
 class SlamConfig:
     # "none"; "graph": Pham et al.'s sliding-window graph SLAM; "hector": Ueland 2017's Hector-style
-    # SLAM; both
-    # on lidar_scan (needs lidar2d). "known_poses": the exploration's ground-truth map source —
-    # the same scans inserted at the true pose (grid extent and resolution from ``hector``).
-    # The SLAM runs in the autonomy half as an observer; metrics score it against ground truth.
-    # "factor_graph": Roboat II's lidar-IMU-GPS factor graph on iSAM2 (needs lidar3d, imu and gps).
+    # SLAM; both on lidar_scan (needs lidar2d). "known_poses": the exploration's ground-truth map
+    # source — the same scans inserted at the true pose (grid extent and resolution from
+    # ``hector``). The SLAM runs in the autonomy half as an observer; metrics score it against
+    # ground truth. "factor_graph": Roboat II's lidar-IMU-GPS factor graph on iSAM2 (needs lidar3d,
+    # imu and gps).
     method: str = "none"
     graph: GraphSlamConfig = field(default_factory=GraphSlamConfig)
     hector: HectorConfig = field(default_factory=HectorConfig)
@@ -119,8 +119,7 @@ class ObserverSettings:
 @dataclass
 class ExplorationConfig:
     """Ueland 2017's autonomous exploration: frontier explorer + weighted A* + velocity-setpoint law
-    +
-    reference model + PD controller + thrust allocation (controller ``explore``)."""
+    + reference model + PD controller + thrust allocation (controller ``explore``)."""
 
     explorer: ExplorerConfig = field(default_factory=ExplorerConfig)
     setpoint_rate_hz: float = 10.0  # [Hz] the velocity-setpoint law (faster than the planner)

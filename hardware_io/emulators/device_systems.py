@@ -48,9 +48,8 @@ class McuEmulator(LeafSystem):
 
     Every ``tick`` seconds (first at 0): read the host's bytes, feed them to the
     :class:`~hardware_io.emulators.firmware.McuFirmware` with the wall-clock time, run its
-    watchdog, and
-    hold the forces of the PWM it outputs (the station's ``thruster_command`` layout) in
-    discrete state; every ``telemetry_period`` send a telemetry frame.
+    watchdog, and hold the forces of the PWM it outputs (the station's ``thruster_command`` layout)
+    in discrete state; every ``telemetry_period`` send a telemetry frame.
     """
 
     def __init__(
@@ -146,8 +145,7 @@ class ImuEmulator(LeafSystem):
     Inputs: ``state`` and, with ``simulated_imu``, ``imu`` (the simulated station's
     :class:`ImuSample`, sent as it is). Without it: orientation = yaw ψ + N(0, σψ²), rate of
     turn z = r + N(0, σr²), specific force = gravity only (an AHRS heading with Roboat II eq. 16's
-    σ;
-    the NMHE reads only ψ and r).
+    σ; the NMHE reads only ψ and r).
     """
 
     def __init__(

@@ -3,8 +3,7 @@
 What the STM32 (Roboat II) / Arduino (NTNU round vessel, Ueland 2017) does with the protocol of
 ``hardware_io/PROTOCOL.md`` (codec: :mod:`hardware_io.codecs.thrust`), without Drake and without
 I/O, so a device emulator (a :class:`~hardware_io.emulators.pty_link.PtyDevice` loop) and tests
-can stand in
-for the board:
+can stand in for the board:
 
 * :meth:`McuFirmware.feed` — received bytes → :class:`~hardware_io.codecs.thrust.FrameParser`;
   each valid command frame with the right number of channels sets the outputs (PWM clamped to
@@ -60,8 +59,8 @@ class McuFirmware:
     ``watchdog_tripped``, ``watchdog_trip_time`` [s] (``now`` of the tick that tripped after the
     last valid command; ``None`` at power-up and after a new command), counters
     ``frames_ok``, ``frames_rejected``, ``parser_errors``, ``seq_gaps``, ``watchdog_trips`` (and
-    their times ``trip_times``),
-    ``telemetry_sent``. Set ``esc_fault = True`` to report status bit ``ESC_FAULT``.
+    their times ``trip_times``), ``telemetry_sent``. Set ``esc_fault = True`` to report status bit
+    ``ESC_FAULT``.
     """
 
     def __init__(

@@ -181,6 +181,7 @@ def slam_metrics(
         "optimisation_ms_median": float(np.median(opt)),
         "optimisation_ms_max": float(np.max(opt)),
         "full_optimisation_ms_max": float(max(summary.full_optimisation_ms, default=0.0)),
+        "slam_rejected_scans": summary.rejected_scans,
     }
 
 

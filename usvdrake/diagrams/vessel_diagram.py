@@ -1,5 +1,6 @@
 """``build_vessel_diagram``: one vessel = station (sim | hardware) + autonomy, wired by name."""
 
+import numpy as np
 from pydrake.geometry import Meshcat
 from pydrake.systems.framework import Diagram, DiagramBuilder
 
@@ -10,24 +11,23 @@ from usvdrake.scenario import Scenario
 from usvdrake.vessel import VesselParams, load_vessel
 from usvdrake.viz.exploration_visualizer import ExplorationVisualizer
 from usvdrake.viz.lidar_visualizer import LidarVisualizer
-from usvdrake.viz.meshcat_world import draw_occupancy, draw_world, look_at
+from usvdrake.viz.meshcat_world import (
+    draw_occupancy,
+    draw_world,
+    frame_view,
+    light_scene,
+    view_bounds,
+)
 from usvdrake.viz.occupancy_visualizer import OccupancyVisualizer
 from usvdrake.viz.point_map_visualizer import KeyframeMapVisualizer
 from usvdrake.viz.trajectory_visualizer import TrajectoryVisualizer, draw_reference
-from usvdrake.viz.vessel_visualizer import VesselVisualizer
+from usvdrake.viz.vessel_visualizer import FLEET_COLORS, VesselVisualizer
 from usvdrake.worlds import make_world
 from usvdrake.worlds.world import World
 
 # Inputs a vessel diagram takes from outside the vessel (the fleet): the coordinator's ride
 # (``task``, to the autonomy) and the other boats' states (``other_vessels``, to the lidars).
 FLEET_INPUTS = ("task", "other_vessels")
-FLEET_COLORS = (  # hull colours of a fleet's boats, in order
-    (0.95, 0.55, 0.1),
-    (0.2, 0.6, 0.95),
-    (0.35, 0.8, 0.35),
-    (0.85, 0.3, 0.75),
-    (0.95, 0.85, 0.2),
-)
 
 
 def build_vessel_diagram(
@@ -147,9 +147,20 @@ def build_vessel_diagram(
                     )
                     builder.Connect(drawn_state, hits.GetInputPort("state"))
                     builder.Connect(station.GetOutputPort(port), hits.GetInputPort("lidar"))
+        # the view: the planned route (start and waypoints), or the water for open-ended runs
+        route = [scenario.initial_state[:2], *scenario.mission.waypoints]
+        if len(route) > 1:
+            bounds = view_bounds(route)
+        elif not world.water.is_empty:
+            bounds = world.water.bounds
+        else:
+            bounds = view_bounds([np.add(route[0], d) for d in ((-20, -20), (20, 20))])
         if index == 0:
-            x0, y0 = scenario.initial_state[:2]
-            look_at(meshcat, [x0, y0, 0.0], distance=max(20.0 * vessel.hull.length, 8.0))
+            light_scene(meshcat)
+            frame_view(meshcat, bounds)
+        # a 2 m boat in a 200 m view: a halo ~3 % of the view across makes it findable
+        span = max(bounds[2] - bounds[0], bounds[3] - bounds[1])
+        marker = max(0.8 * vessel.hull.length, 0.015 * span)
         viz = builder.AddNamedSystem(
             "vessel_visualizer",
             VesselVisualizer(
@@ -159,6 +170,7 @@ def build_vessel_diagram(
                 scenario.mission.waypoints,
                 prefix=f"/vessels/{member}" if member else None,
                 color=FLEET_COLORS[index % len(FLEET_COLORS)] if member else None,
+                marker_radius=marker,
             ),
         )
         builder.Connect(drawn_state, viz.GetInputPort("state"))

@@ -13,11 +13,12 @@ from pydrake.systems.primitives import LogVectorOutput
 
 from usvdrake.analysis.metrics import vessel_clearance
 from usvdrake.diagrams.fleet_diagram import build_fleet_diagram
-from usvdrake.diagrams.vessel_diagram import FLEET_COLORS
 from usvdrake.run.simulate import MissionResult, make_meshcat, simulate
 from usvdrake.scenario import Scenario
 from usvdrake.systems.guidance.taxi_pilot import PHASES
 from usvdrake.vessel import VesselParams, load_vessel
+from usvdrake.viz.replay import finish_replay
+from usvdrake.viz.vessel_visualizer import FLEET_COLORS
 from usvdrake.worlds import make_world
 
 
@@ -176,7 +177,10 @@ def run_fleet_mission(
         if meshcat is not None and record:
             meshcat.StopRecording()
             meshcat.PublishRecording()
-            (out / "replay.html").write_text(meshcat.StaticHtml())
+            speed = {n: np.hypot(tracks[n][:, 3], tracks[n][:, 4]) for n in names}
+            title = f"usvdrake run {scenario.name}"
+            page = finish_replay(meshcat.StaticHtml(), times, speed, title, fleet_colors=True)
+            (out / "replay.html").write_text(page)
         (out / "diagram.dot").write_text(fleet.GetGraphvizString(max_depth=1))
         result.files.update(
             {k: out / f for k, f in (("metrics", "metrics.json"), ("rides", "rides.json"))}

@@ -3,6 +3,7 @@
 import json
 from pathlib import Path
 
+import numpy as np
 from pydrake.geometry import Meshcat
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput
@@ -21,6 +22,7 @@ from usvdrake.run.measure import (
 from usvdrake.run.simulate import MissionResult, make_meshcat, simulate, write_tum
 from usvdrake.scenario import Scenario, scenario_yaml
 from usvdrake.vessel import load_vessel
+from usvdrake.viz.replay import finish_replay
 from usvdrake.viz.report import write_report
 from usvdrake.worlds import make_world
 
@@ -125,7 +127,11 @@ def run_mission(
         if meshcat is not None and record:
             meshcat.StopRecording()
             meshcat.PublishRecording()
-            (out / "replay.html").write_text(meshcat.StaticHtml())
+            speed = {vessel.name: np.hypot(states[:, 3], states[:, 4])}
+            page = finish_replay(
+                meshcat.StaticHtml(), times, speed, f"usvdrake run {scenario.name}"
+            )
+            (out / "replay.html").write_text(page)
             result.files["replay"] = out / "replay.html"
         write_report(
             out / "report.html",

@@ -32,8 +32,7 @@ from usvdrake.typed_yaml import ConfigError
 GARBAGE_KINDS = ("random", "half_empty", "nan")
 
 # The graph SLAM for scan streams at the sensor's rate (ROS bags, mission logs): Pham et al.'s, a
-# poor
-# match re-seeded by the correlative search.
+# poor match re-seeded by the correlative search.
 STREAM_CONFIG = GraphSlamConfig(correlative_trigger=1.0)
 
 # The graph SLAM for CARMEN building logs, which may be subsampled (the "corrected" CARMEN logs step
@@ -41,9 +40,9 @@ STREAM_CONFIG = GraphSlamConfig(correlative_trigger=1.0)
 # intel-corrected (910 scans; bench/slam2d_logs.py):
 # * every scan is also searched from rest by the correlative matcher (±1.5 m, ±92°: MIT-CSAIL
 #   turns up to 78° between scans), the search replacing PLICP's constant-velocity match when
-#   its likelihood is 0.05 higher;
-#   PLICP refines a searched pose pairing points within 0.5 m only (from 1 m it wandered off
-#   a good seed: steps off by > 0.2 m or 3° went from 42 to 24 of 909, loops off);
+# its likelihood is 0.05 higher; PLICP refines a searched pose pairing points within 0.5 m only
+# (from 1 m it wandered off a good seed: steps off by > 0.2 m or 3° went from 42 to 24 of 909, loops
+# off);
 # * a candidate of that search or that choice scores 0.25 /m² × its sideways motion² less (the
 #   step off the arc through both poses, ``correlative.lateral_motion``): a wheeled robot cannot
 #   slide, and corridors had matched 30° turns on the spot as turns plus sideways jumps of up

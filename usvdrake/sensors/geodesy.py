@@ -37,8 +37,7 @@ class Datum:
 
 DATUMS: dict[str, Datum] = {
     # Amsterdam canal ring: Herengracht by the Leidsegracht, the waters Roboat II sails in (Roboat
-    # II
-    # §VI). Height: the Dutch quasi-geoid (NLGEO2018) lies about 43 m above the ellipsoid here
+    # II §VI). Height: the Dutch quasi-geoid (NLGEO2018) lies about 43 m above the ellipsoid here
     # (RDNAPTRANS™2018 uses a fixed 43 m as the Dutch mean), and the canal-ring water level
     # ("grachtenpeil") is held at NAP −0.40 m, so the water surface is ≈ 42.6 m ellipsoidal.
     "amsterdam": Datum("amsterdam", 52.3676, 4.8897, 42.6),
@@ -47,10 +46,9 @@ DATUMS: dict[str, Datum] = {
     # the basin is held by the Charles River Dam at roughly +0.5 m NAVD88, so ≈ −27.8 m.
     "charles_river": Datum("charles_river", 42.3566, -71.0865, -27.8),
     # NTNU, Trondheim: the coordinates of Ueland 2017's home (the Marine Technology Centre basin
-    # area;
-    # the point itself is on the Gløshaugen campus, the Tyholt basins ~2 km east — any nearby
-    # point serves as an ENU origin). Geoid undulation ≈ 40 m (NN2000 geoid over Trondheim);
-    # height taken at sea level (Trondheimsfjord), i.e. ≈ 40 m ellipsoidal, for open-water runs.
+    # area; the point itself is on the Gløshaugen campus, the Tyholt basins ~2 km east — any nearby
+    # point serves as an ENU origin). Geoid undulation ≈ 40 m (NN2000 geoid over Trondheim); height
+    # taken at sea level (Trondheimsfjord), i.e. ≈ 40 m ellipsoidal, for open-water runs.
     "trondheim": Datum("trondheim", 63.4187, 10.4030, 40.0),
     # Ho Chi Minh City University of Technology (HCMUT, 268 Lý Thường Kiệt) by Phú Thọ lake.
     # The Vietnamese geoid is negative in the north-west and positive in the south-east and

@@ -9,9 +9,8 @@ measurement vector z = [x y ψ r f1 f2 f3 f4] of Roboat II eq. (8) (the forces c
 
 with the defaults σ = (√0.0005 m, √0.0005 m, √0.0005 rad, √0.0001 rad/s) ≈ (0.022, 0.022,
 0.022, 0.01): the square roots of the measurement covariance RT⁻¹ of Roboat II eq. (16), so the
-NMHE's
-weights are the true inverse covariances. The heading is wrapped as a SLAM or AHRS heading is;
-the estimator unwraps it.
+NMHE's weights are the true inverse covariances. The heading is wrapped as a SLAM or AHRS heading
+is; the estimator unwraps it.
 """
 
 from dataclasses import dataclass

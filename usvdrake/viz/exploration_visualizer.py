@@ -1,7 +1,6 @@
 """``ExplorationVisualizer``: Ueland 2017's operator display in Meshcat (§Operator Interaction) —
-the
-planned path, its destination, the frontier cells and the setpoint, drawn live over the SLAM
-map (drawn by :class:`~usvdrake.viz.occupancy_visualizer.OccupancyVisualizer`)."""
+the planned path, its destination, the frontier cells and the setpoint, drawn live over the SLAM map
+(drawn by :class:`~usvdrake.viz.occupancy_visualizer.OccupancyVisualizer`)."""
 
 import numpy as np
 from pydrake.common.value import AbstractValue

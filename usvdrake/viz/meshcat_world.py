@@ -135,3 +135,59 @@ def look_at(meshcat: Meshcat, target: np.ndarray, distance: float) -> None:
     """Put the camera behind-above ``target`` (a 3-vector) at roughly ``distance`` [m]."""
     eye = np.asarray(target, float) + distance * np.array([-0.45, -0.2, 0.87])
     meshcat.SetCameraPose(eye, np.asarray(target, float))
+
+
+def view_bounds(points) -> tuple[float, float, float, float]:
+    """``(xmin, ymin, xmax, ymax)`` of the (x, y) ``points`` with a margin around them."""
+    xy = np.asarray(points, float).reshape(-1, 2)
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    margin = max(5.0, 0.08 * float(np.max(hi - lo)))
+    return lo[0] - margin, lo[1] - margin, hi[0] + margin, hi[1] + margin
+
+
+def frame_view(
+    meshcat: Meshcat, bounds, elevation_deg: float = 70.0, fov_deg: float = 75.0, aspect=1.4
+) -> None:
+    """Aim the camera high and oblique so the whole ``(xmin, ymin, xmax, ymax)`` box is in view
+    (``fov_deg``: Meshcat's vertical field of view; ``aspect``: the narrowest window width/height
+    it is framed for). The box's longer side runs across the screen."""
+    xmin, ymin, xmax, ymax = bounds
+    centre = np.array([(xmin + xmax) / 2, (ymin + ymax) / 2, 0.0])
+    corners = np.array([[x, y, 0.0] for x in (xmin, xmax) for y in (ymin, ymax)])
+    el = np.radians(elevation_deg)
+    back = np.array([0.0, -1.0]) if xmax - xmin >= ymax - ymin else np.array([1.0, 0.0])
+    towards = np.array([*(np.cos(el) * back), np.sin(el)])  # unit, from the centre to the eye
+    right = np.cross(-towards, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, -towards)
+    tan_v = np.tan(np.radians(fov_deg) / 2)
+
+    def fits(distance: float) -> bool:
+        rel = corners - (centre + distance * towards)
+        depth = rel @ -towards
+        return bool(
+            np.all(depth > 0)
+            and np.all(np.abs(rel @ right) <= depth * tan_v * aspect)
+            and np.all(np.abs(rel @ up) <= depth * tan_v)
+        )
+
+    distance = 1.0
+    while not fits(distance) and distance < 1e5:
+        distance *= 1.05
+    meshcat.SetCameraPose(centre + distance * towards, centre)
+    # Meshcat's camera sees 0.01 to 100 m: a harbour-sized view needs a farther far plane (and a
+    # nearer-is-coarser near plane, for depth precision between the water and the lines on it)
+    camera = "/Cameras/default/rotated/<object>"
+    meshcat.SetProperty(camera, "far", max(100.0, 3.0 * distance))
+    meshcat.SetProperty(camera, "near", float(np.clip(distance / 2000, 0.01, 0.5)))
+
+
+def light_scene(meshcat: Meshcat) -> None:
+    """A light background and even daylight: Drake's point lights sit near the origin and make
+    a dark scene with glare spots at the scale of a harbour."""
+    meshcat.SetProperty("/Background", "top_color", [0.97, 0.97, 0.96])
+    meshcat.SetProperty("/Background", "bottom_color", [0.86, 0.87, 0.86])
+    for light in ("PointLightNegativeX", "PointLightPositiveX", "SpotLight"):
+        meshcat.SetProperty(f"/Lights/{light}", "visible", False)
+    meshcat.SetProperty("/Lights/AmbientLight/<object>", "intensity", 2.2)
+    meshcat.SetProperty("/Lights/FillLight/<object>", "intensity", 1.2)

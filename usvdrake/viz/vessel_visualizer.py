@@ -11,11 +11,22 @@ from usvdrake.scenario import VisualizationConfig
 from usvdrake.systems.vessel.thrusters import command_size, split_command
 from usvdrake.vessel import VesselParams
 
-HULL_COLOR = Rgba(0.93, 0.93, 0.90, 1.0)
-DECK_MARK = Rgba(0.85, 0.20, 0.15, 1.0)
-ARROW_COLOR = Rgba(1.0, 0.55, 0.0, 0.95)
+# violet: a colour nothing else in the scene uses, so the hull is findable (and testable) on screen
+HULL_COLOR = Rgba(0.62, 0.0, 1.0, 1.0)
+HALO_ALPHA = 0.5  # the disc under the hull, in the hull's colour
+DECK_MARK = Rgba(1.0, 1.0, 1.0, 1.0)
+ARROW_COLOR = Rgba(1.0, 0.35, 0.0, 1.0)
 TRAIL_COLOR = Rgba(1.0, 0.85, 0.1, 1.0)
 ROUTE_COLOR = Rgba(0.3, 1.0, 0.5, 0.8)
+
+
+FLEET_COLORS = (  # hull colours of a fleet's boats, in order
+    (0.95, 0.55, 0.1),
+    (0.2, 0.6, 0.95),
+    (0.35, 0.8, 0.35),
+    (0.85, 0.3, 0.75),
+    (0.95, 0.85, 0.2),
+)
 
 
 class VesselVisualizer(LeafSystem):
@@ -41,6 +52,7 @@ class VesselVisualizer(LeafSystem):
         waypoints=(),
         prefix: str | None = None,
         color=None,
+        marker_radius: float = 0.0,
     ):
         super().__init__()
         self._meshcat, self._vessel, self._cfg = meshcat, vessel, cfg
@@ -49,7 +61,11 @@ class VesselVisualizer(LeafSystem):
         self._hull_color = HULL_COLOR if color is None else Rgba(*color, 1.0)  # (r, g, b) in [0, 1]
         self._period = 1.0 / cfg.rate_hz
         self._chunk = max(1, int(round(cfg.trail_chunk * cfg.rate_hz)))
-        self._arrow_length = cfg.arrow_length or vessel.hull.length / 2
+        # a flat disc of ``marker_radius`` [m] under the hull (0: none) so a small boat is seen
+        # in a wide view; the thrust arrows scale with it
+        self._marker = max(float(marker_radius), 0.0)
+        self._arrow_length = cfg.arrow_length or max(vessel.hull.length, 2.0 * self._marker)
+        self._arrow_radius = max(0.08 * vessel.hull.length, 0.12 * self._marker)
         self._state = self.DeclareVectorInputPort("state", 6)
         self._thrust = self.DeclareVectorInputPort("thrust_applied", command_size(vessel.thrusters))
         self._trail = self.DeclareAbstractState(AbstractValue.Make(np.zeros((0, 2))))
@@ -84,10 +100,14 @@ class VesselVisualizer(LeafSystem):
         m.SetTransform(
             f"{p}/hull/bow_mark", RigidTransform([0.35 * hull.length, 0, freeboard + 0.01])
         )
-        radius = 0.025 * hull.length
+        if self._marker > 0:
+            c = self._hull_color
+            halo = Rgba(c.r(), c.g(), c.b(), HALO_ALPHA)
+            m.SetObject(f"{p}/hull/halo", Cylinder(self._marker, 0.02), halo)
+            m.SetTransform(f"{p}/hull/halo", RigidTransform([0, 0, 0.02]))
         for t in self._vessel.thrusters:
             base = f"{p}/hull/thrusters/{t.name}"
-            m.SetObject(f"{base}/scale/arrow", Cylinder(radius, 1.0), ARROW_COLOR)
+            m.SetObject(f"{base}/scale/arrow", Cylinder(self._arrow_radius, 1.0), ARROW_COLOR)
             m.SetTransform(
                 f"{base}/scale/arrow", RigidTransform(RollPitchYaw(0, np.pi / 2, 0), [0.5, 0, 0])
             )

@@ -1,7 +1,6 @@
 """The NTNU Marine Cybernetics Laboratory basin as set up for lidar exploration (Ueland 2017,
-section
-Experimental Results): a 40 m × 6.45 m basin with concrete walls, a sloped wave-generator end,
-an open middle section with camera mounts, other vessels and hinders on wooden planks, a narrow
+section Experimental Results): a 40 m × 6.45 m basin with concrete walls, a sloped wave-generator
+end, an open middle section with camera mounts, other vessels and hinders on wooden planks, a narrow
 passage (position B of Ueland 2017 Fig. 16) and a labyrinth-like section.
 
 Frame: the origin is the south-west corner of the water, x east along the 40 m length, y north
@@ -9,17 +8,13 @@ across the 6.45 m width, z up from the water surface. The wave generator closes 
 (x = 0, "the wall on the very left hand of the basin" in Ueland 2017), the labyrinth the east end.
 
 Only the basin's size comes from Ueland 2017; the paper shows the set-up in photographs (Figs. 14,
-16)
-that the text extraction lost, so the positions, sizes and heights below are guesses, chosen so
+16) that the text extraction lost, so the positions, sizes and heights below are guesses, chosen so
 that a 0.548 m round vessel (Ueland 2017, Experimental Platform) whose planner inflates the map by
-0.4 m
-(Ueland 2017, Map Processing) reaches every part of the basin: a disc of radius 0.3 m + 0.4 m must
-pass
-every corridor and gap, which on a 0.1 m ground-truth grid (each wall also blackens the cells it
-touches) takes 1.8 m. The narrow passage is therefore 1.8-2.0 m wide (Ueland 2017 gives no width);
-with
-~0.6 m free on each side of the vessel it is still where the velocity law slows it down.
-Everything random comes from ``numpy.random.default_rng(seed)`` and only moves things within
+0.4 m (Ueland 2017, Map Processing) reaches every part of the basin: a disc of radius 0.3 m + 0.4 m
+must pass every corridor and gap, which on a 0.1 m ground-truth grid (each wall also blackens the
+cells it touches) takes 1.8 m. The narrow passage is therefore 1.8-2.0 m wide (Ueland 2017 gives no
+width); with ~0.6 m free on each side of the vessel it is still where the velocity law slows it
+down. Everything random comes from ``numpy.random.default_rng(seed)`` and only moves things within
 those limits.
 """
 
@@ -48,9 +43,8 @@ START = (1.5, WIDTH / 2)  # [m] a free point near the wave-generator end
 
 def _beach() -> Solid:
     """The wave generator's smooth sloped face (Ueland 2017: "not purely vertical"): the solid
-    behind
-    x = 0 under the plane z = −x tan(slope), so a horizontal beam at height z meets it at
-    x = −z / tan(slope), farther the higher the beam."""
+    behind x = 0 under the plane z = −x tan(slope), so a horizontal beam at height z meets it at x =
+    −z / tan(slope), farther the higher the beam."""
     t = np.tan(BEACH_SLOPE)
     n = np.array([t, 0.0, 1.0]) / np.hypot(t, 1.0)  # n·p ≤ 0  ⇔  z ≤ −x tan(slope)
     footprint = [

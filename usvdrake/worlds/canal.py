@@ -214,8 +214,7 @@ def _arc(radius: float, a0_deg: float, a1_deg: float, step: float = 10.0) -> lis
 
 def charles_river(seed: int = 0) -> World:
     """A reach like the Charles River basin where Roboat II §VI-B tested NMPC and NMHE: 200 m of
-    open
-    water (the real basin is ~500 m wide), 900 m long with a gentle bend, walled banks, a few
+    open water (the real basin is ~500 m wide), 900 m long with a gentle bend, walled banks, a few
     moored boats and one long bridge (like the Harvard Bridge). Local origin mid-reach."""
     return canal_network(
         "charles_river",

@@ -241,10 +241,9 @@ def phu_tho_lake(seed: int = 0) -> World:
     bushes" that the USV2000 followed closely with a Hokuyo UTM-30LX.
 
     Guessed: about 150 m × 100 m (a park lake; Pham et al. gives no size), a 2 m bank 0.8-1.2 m
-    above
-    the water, a bush every ~2.5 m of shore and trees every ~10 m, and in front of each bush
-    4-10 "leaf" solids (2-30 cm across, 5-30 cm tall) hanging over the water 0.2-1.5 m up and up
-    to 1.5 m out from the bush: a horizontal scan at 0.3-0.6 m cuts some of them, so short-range
+    above the water, a bush every ~2.5 m of shore and trees every ~10 m, and in front of each bush
+    4-10 "leaf" solids (2-30 cm across, 5-30 cm tall) hanging over the water 0.2-1.5 m up and up to
+    1.5 m out from the bush: a horizontal scan at 0.3-0.6 m cuts some of them, so short-range
     returns are scattered and change with the sensor's height and position, as Pham et al.
     describes."""
     rng = np.random.default_rng(seed)

@@ -13,8 +13,7 @@ frame, Kp Rᵀ(ψ̂) η̃ as in Fossen's DP PID (Fossen 2011 §12.2, our reading
 the same when Kp_x = Kp_y, as for the round hull), so that Kp pairs with the body-frame M and D
 below at any heading. The first two terms are the model feed-forward of
 M ν̇ + D ν = τ (Roboat II eq. 2 without Coriolis, negligible at Ueland 2017's 0–0.3 m/s and zero for
-the
-round hull's m11 = m22 when r = 0); the last cancels the estimated environmental force.
+the round hull's m11 = m22 when r = 0); the last cancels the estimated environmental force.
 
 Gains from a closed-loop natural frequency ω_n and damping ζ per DOF:
 

@@ -21,11 +21,10 @@ sample) are propagated through the same RK4 stages (RK4 applied to the variation
 Ṡ = ∂f/∂ν S + ∂f/∂ξ gives exactly the derivative of the RK4 map), in numpy over the trial batch.
 
 SNOPT (an SQP method, as Roboat II uses because it keeps the bounds at every iterate) solves (9)
-through
-Drake's MathematicalProgram. Decision variables are θ = log(ξ / ξ0), ξ0 the initial guess, so all
-six are O(1) although ξ spans 16-190; the objective handed to SNOPT is (9a) divided by the number
-of residuals. Uncertainty: the Gauss-Newton cov ξ̂ ≈ s² (Σ Sᵀ w S)⁻¹, s² = J / (n_residuals − 6),
-and, reported as σ, a robust sandwich estimate that allows for residuals correlated in time
+through Drake's MathematicalProgram. Decision variables are θ = log(ξ / ξ0), ξ0 the initial guess,
+so all six are O(1) although ξ spans 16-190; the objective handed to SNOPT is (9a) divided by the
+number of residuals. Uncertainty: the Gauss-Newton cov ξ̂ ≈ s² (Σ Sᵀ w S)⁻¹, s² = J / (n_residuals −
+6), and, reported as σ, a robust sandwich estimate that allows for residuals correlated in time
 (noise on the recorded thrust makes them so; see :meth:`OutputErrorProblem.covariance`).
 """
 

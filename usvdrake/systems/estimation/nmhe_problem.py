@@ -67,8 +67,7 @@ interior-point method's accuracy does not depend on the conditioning (the weight
 10⁴) and needs no iteration limit.
 
 **IMU** (not in Roboat II, whose z is pose and thrust only; used when an IMU feeds the window).
-Waves
-move a small boat at 0.3-1 Hz by a few cm/s but only ~1 cm, under the pose noise (σ = 2.2 cm):
+Waves move a small boat at 0.3-1 Hz by a few cm/s but only ~1 cm, under the pose noise (σ = 2.2 cm):
 no estimator on poses alone can see that motion (river_tracking: u, v RMSE 0.041 m/s on poses,
 0.009 / 0.012 with the IMU). The IMU's readings, averaged over each interval (``ImuIntervalMean``,
 level frame), m_k = [f̄_x f̄_y ω̄_z], add

@@ -4,10 +4,8 @@
 Model (Fossen 2011 §11.4.1, low-speed / dynamic-positioning form, Coriolis neglected):
 
     ξ̇ = A_w ξ,   η_w = C_w ξ                          wave-frequency motion (2nd-order per DOF)
-    η̇ = R(ψ) ν
-    ḃ = −T⁻¹ b                                        slowly varying bias, world frame
-    M ν̇ = −D ν + Rᵀ(ψ) b + τ
-    y = η + η_w                                       measured pose [x, y, ψ]
+    η̇ = R(ψ) ν ḃ = −T⁻¹ b slowly varying bias, world frame M ν̇ = −D ν + Rᵀ(ψ) b + τ y = η + η_w
+    measured pose [x, y, ψ]
 
 with A_w = [[0, I], [−Ω², −2ΛΩ]], C_w = [0, I], Ω = diag(ω_oi) (dominating wave frequency),
 Λ = diag(ζ_i) (wave-spectrum damping), M = diag(m11, m22, m33), D = diag(Xu, Yv, Nr).

@@ -26,8 +26,7 @@ class AStarPlanner(LeafSystem):
         - destination
 
     ``path``: the first 128 cell centres [m] (n × 2) of the path (Ueland 2017 hands 128 points to
-    the
-    setpoint law per cycle), empty with no goal or no path; ``destination`` = [x, y, valid,
+    the setpoint law per cycle), empty with no goal or no path; ``destination`` = [x, y, valid,
     cost] of the chosen goal (cost [m] weighted by Ueland 2017 eq. 1). Goal hysteresis: the previous
     destination is kept while it is still a goal and no other is cheaper by more than
     ``replan_margin`` (a fraction), so two nearly equal frontiers do not make the vessel dither

@@ -2,13 +2,11 @@
 1).
 
 Ueland 2017 imports Hector SLAM's occupancy grid, reads each cell as occupied, free or unexplored
-and
-prepares it for its planner in four steps (Ueland 2017 Fig. 10 a-d), all here:
+and prepares it for its planner in four steps (Ueland 2017 Fig. 10 a-d), all here:
 
 1. **Coarsening** (:func:`coarsen`): the SLAM map (5 cm for the scan matcher) is reduced to the
    planning resolution (Ueland 2017 plans on a coarser grid): a planning cell is occupied when any
-   of
-   its fine cells is, free when at least ``free_fraction`` of them are seen free, else unknown.
+   of its fine cells is, free when at least ``free_fraction`` of them are seen free, else unknown.
 2. **Unknown cells near the vessel are free**: the lidar never sees the water under the hull
    (the RPLIDAR's minimum range is 0.15 m), so cells within ``near_free_radius`` of the vessel
    that the map does not know are taken as free.
@@ -22,11 +20,9 @@ prepares it for its planner in four steps (Ueland 2017 Fig. 10 a-d), all here:
 4. **Reachability**: free cells not 8-connected to the vessel's cell are dropped.
 
 The weight of each remaining cell is Ueland 2017 eq. (1), w = 1 + 5 / (0.1 + d_obj), with d_obj [m]
-the
-distance from the cell's centre to the closest occupied cell's centre (Ueland 2017's definition),
-from
-the same transform; the planner integrates w along its path, so it prefers to
-keep away from objects.
+the distance from the cell's centre to the closest occupied cell's centre (Ueland 2017's
+definition), from the same transform; the planner integrates w along its path, so it prefers to keep
+away from objects.
 """
 
 from dataclasses import dataclass
@@ -44,8 +40,7 @@ WEIGHT_OFFSET = 0.1  # [m] Ueland 2017 eq. (1)
 
 def cost_weight(d_obj: np.ndarray, gain: float = WEIGHT_GAIN, offset: float = WEIGHT_OFFSET):
     """Ueland 2017 eq. (1): the cost of crossing a cell whose centre is ``d_obj`` [m] from the
-    nearest
-    occupied cell, w = 1 + gain / (offset + d_obj); w → 1 far from everything."""
+    nearest occupied cell, w = 1 + gain / (offset + d_obj); w → 1 far from everything."""
     return 1.0 + gain / (offset + np.asarray(d_obj, dtype=float))
 
 
@@ -193,10 +188,9 @@ def process_map(
 
 def frontier_cells(pmap: PlanningMap, min_cluster: int = 3) -> np.ndarray:
     """Frontier cells (Ueland 2017 §Exploration Strategy step 1; Yamauchi 1997): traversable cells
-    with
-    an unknown 8-neighbour, as an (n, 2) (row, col) array. Frontiers are grouped 8-connected
-    and groups smaller than ``min_cluster`` cells are dropped: a gap of a cell or two between
-    seen cells is lidar sparsity, not unexplored space worth a trip."""
+    with an unknown 8-neighbour, as an (n, 2) (row, col) array. Frontiers are grouped 8-connected
+    and groups smaller than ``min_cluster`` cells are dropped: a gap of a cell or two between seen
+    cells is lidar sparsity, not unexplored space worth a trip."""
     touches_unknown = ndimage.binary_dilation(pmap.unknown, structure=EIGHT)
     frontier = pmap.traversable & touches_unknown
     if min_cluster > 1 and frontier.any():

@@ -1,9 +1,8 @@
 """Operator commands (Ueland 2017 §Operator Interaction): explore, go to a location, stop.
 
 Ueland 2017's operator window lets the user "toggle between automatic exploration and navigation to
-a
-known location on the map"; we add stop. A command travels as a 3-vector
-[mode, goal_x, goal_y] (``operator_command`` ports), the mode one of :class:`OperatorMode`.
+a known location on the map"; we add stop. A command travels as a 3-vector [mode, goal_x, goal_y]
+(``operator_command`` ports), the mode one of :class:`OperatorMode`.
 """
 
 import enum
@@ -53,8 +52,7 @@ GOAL_SLIDERS = ("Goal x [m]", "Goal y [m]")
 
 class OperatorPanel(LeafSystem):
     """Ueland 2017's operator controls as a LeafSystem: Meshcat buttons (Explore / Go to goal /
-    Stop,
-    keys E / G / S) and two goal sliders, and/or a script of timed commands.
+    Stop, keys E / G / S) and two goal sliders, and/or a script of timed commands.
 
     .. pydrake_system::
 

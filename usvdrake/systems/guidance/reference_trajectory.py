@@ -22,11 +22,10 @@ planner's straight legs (:mod:`grid_astar`) into that reference:
   impulse of ṙ there is not represented).
 
 Defaults: a_max = 0.1 m/s² takes m11 a_max = 17 N of Roboat II's 100 N surge thrust (Roboat II eq.
-14,
-m11 = 172 kg), leaving most for feedback and 0.6 m/s is reached in 9.4 s over 2.8 m;
-r_max = 0.25 rad/s keeps a margin under the |r| ≤ 0.3 rad/s we allow Roboat II at 0.6 m/s
-(R = 2.4 m; holding v = 0 on the arc takes m11 u r = 26 N of sway thrust);
-ṙ_max = 0.1 rad/s² needs m33 ṙ_max = 2.4 N m of ~100 N m yaw authority.
+14, m11 = 172 kg), leaving most for feedback and 0.6 m/s is reached in 9.4 s over 2.8 m; r_max =
+0.25 rad/s keeps a margin under the |r| ≤ 0.3 rad/s we allow Roboat II at 0.6 m/s (R = 2.4 m;
+holding v = 0 on the arc takes m11 u r = 26 N of sway thrust); ṙ_max = 0.1 rad/s² needs m33 ṙ_max =
+2.4 N m of ~100 N m yaw authority.
 """
 
 import math
@@ -290,12 +289,11 @@ class ReferenceTrajectory:
     ``legs``: polylines (n_k × 2) [m], each ending at a goal and starting where the previous
     ended; the vessel comes to rest at each goal, turns in place to the next leg and goes on
     (Roboat II §VI-B). ``speed`` [m/s] cruise surge speed; ``accel`` [m/s²] peak surge acceleration
-    of
-    the start and stop ramps; ``yaw_rate`` [rad/s] largest |r| (sets the corner radius
-    speed / yaw_rate); ``yaw_accel`` [rad/s²] peak |ṙ| of turns in place; ``grid`` the planning
-    grid, to keep corner arcs at its inflation clearance (None: arcs are not checked);
-    ``start_heading`` / ``final_heading`` [rad]: turn in place from / to these at the ends
-    (None: start along the path, end as it arrives); ``t0`` [s] start time.
+    of the start and stop ramps; ``yaw_rate`` [rad/s] largest |r| (sets the corner radius speed /
+    yaw_rate); ``yaw_accel`` [rad/s²] peak |ṙ| of turns in place; ``grid`` the planning grid, to
+    keep corner arcs at its inflation clearance (None: arcs are not checked); ``start_heading`` /
+    ``final_heading`` [rad]: turn in place from / to these at the ends (None: start along the path,
+    end as it arrives); ``t0`` [s] start time.
     """
 
     def __init__(

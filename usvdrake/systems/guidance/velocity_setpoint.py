@@ -23,8 +23,8 @@ PATH_POINTS = 128  # Ueland 2017: "the first 128 discrete positions in the plann
 
 def lookahead_distance(d_min: float) -> float:
     """Ueland 2017 eq. (2): the look-ahead r_s [m] for the nearest object at ``d_min`` [m].
-    Continuous
-    at 1 m and 2.1 m; at 0.3 m it steps from 0.1 to 0.1 (d_min − 0.2 = 0.1): continuous too."""
+    Continuous at 1 m and 2.1 m; at 0.3 m it steps from 0.1 to 0.1 (d_min − 0.2 = 0.1): continuous
+    too."""
     d = float(d_min)
     if np.isnan(d):
         raise ValueError("lookahead_distance: d_min is NaN")
@@ -55,8 +55,7 @@ def setpoint_on_path(
     dense: np.ndarray, position, d_min: float, step: float = R_Q
 ) -> tuple[np.ndarray, int, int]:
     """Ueland 2017 steps 2-4 on a re-discretised path ``dense`` (N × 2): the setpoint p_s, the
-    closest
-    index l and the setpoint index s = min(l + n, N) (0-based here: min(l + n, N − 1))."""
+    closest index l and the setpoint index s = min(l + n, N) (0-based here: min(l + n, N − 1))."""
     p = np.asarray(position, dtype=float)[:2]
     closest = int(np.argmin(((dense - p) ** 2).sum(axis=1)))
     n = int(round(lookahead_distance(d_min) / step))
@@ -89,11 +88,10 @@ class VelocitySetpointLaw(LeafSystem):
     ``path`` (abstract (n × 2) [m] array; only the first 128 points are used); ``setpoint`` =
     [x_s, y_s, ψ_s] for the reference model, ψ_s the fixed ``heading`` (the round vessel does not
     steer: Ueland 2017 §Experimental Platform); ``lookahead`` = [r_s, d_min, distance from the
-    vessel to
-    the path's closest point (a cross-track error)]. With an empty path the
-    setpoint holds where the vessel was when the path emptied (stop, or exploration finished).
-    d_min is measured from the lidar, taken to sit at the vessel's centre (Ueland 2017's RPLIDAR is
-    on the centre of the lid).
+    vessel to the path's closest point (a cross-track error)]. With an empty path the setpoint holds
+    where the vessel was when the path emptied (stop, or exploration finished). d_min is measured
+    from the lidar, taken to sit at the vessel's centre (Ueland 2017's RPLIDAR is on the centre of
+    the lid).
     """
 
     def __init__(self, heading: float, initial_xy, rate_hz: float = 10.0):

@@ -1,8 +1,7 @@
 """Weighted multi-goal A* with long connections: the path planner of Ueland 2017 §Path Planner.
 
 The exploration planner of Ueland 2017 ("Marine autonomous exploration using a lidar and SLAM") is
-A*
-(Hart, Nilsson & Raphael 1968) on an occupancy grid with one node per cell centre, extended in
+A* (Hart, Nilsson & Raphael 1968) on an occupancy grid with one node per cell centre, extended in
 three ways (Ueland 2017 §Path Planner):
 
 1. **Connection distance** d ∈ {1, 2, 3, 4} (Ueland 2017 Fig. 7): a node connects to the nodes up to

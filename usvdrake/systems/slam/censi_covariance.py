@@ -10,8 +10,7 @@ match): both outer factors are the inverse Hessian in x, as in Censi 2007 eq. 5.
 
 Here x = [t_x, t_y, θ] and J is the point-to-line cost at the match's final correspondences
 (Pham et al. eq. 5), J = Σ_i r_i², r_i = n_iᵀ (R(θ) p_i + t − a_i), with every point written in
-polar
-form p = ρ u (u the known beam direction): p_i = ρ_i u_i from the current scan, a_i = ρ_a u_a
+polar form p = ρ u (u the known beam direction): p_i = ρ_i u_i from the current scan, a_i = ρ_a u_a
 and b_i = ρ_b u_b its two reference points, n_i ⊥ (b_i − a_i). The measurements z are the
 *ranges*, cov(z) = σ² I (σ the range noise).
 

@@ -48,9 +48,8 @@ class FactorGraphSlam(LeafSystem):
     [x y ψ u v r] (body velocities from the IMU propagation): the last keyframe's estimate
     propagated by the IMU to now. ``slam_covariance`` (9, row-major 3 × 3) of [x y ψ] at the
     last keyframe (iSAM2 marginal). ``slam_pose3d`` = [x y z roll pitch yaw] [m, rad] of the
-    full state.
-    ``slam_map3d``: the map, a :class:`KeyframeMap` (every keyframe's features, voxel-filtered,
-    with its current estimate; drawn by :class:`usvdrake.viz.point_map_visualizer.
+    full state. ``slam_map3d``: the map, a :class:`KeyframeMap` (every keyframe's features,
+    voxel-filtered, with its current estimate; drawn by :class:`usvdrake.viz.point_map_visualizer.
     KeyframeMapVisualizer`).
 
     One periodic update at the IMU's rate, ``TICK_DELAY`` after each sample, takes whatever is

@@ -5,8 +5,7 @@ trusted).
 With the pose from the oracle estimator it isolates the exploration and control from the SLAM
 errors: the map is what a perfect SLAM would build from the same scans (same log-odds grid,
 :class:`LogOddsGrid`, eqs. 15-16 of Pham et al.), not the world's full ground-truth occupancy, which
-the
-vessel would know before looking.
+the vessel would know before looking.
 """
 
 import numpy as np

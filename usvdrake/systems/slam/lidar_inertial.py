@@ -23,8 +23,7 @@ Per sensor message, in time order (:class:`LidarInertialSlam`):
 
 The state is the full 3D body pose T_world_body (gtsam ``Pose3``): the controllers only use
 [x y ψ] (Roboat II §V), but a 3D graph keeps roll, pitch and height apart from the plane's errors,
-so
-a wrong height from GPS altitude or a tilted registration does not leak into x, y, ψ — and the
+so a wrong height from GPS altitude or a tilted registration does not leak into x, y, ψ — and the
 vertical drift is observable for the ablation (Roboat II §VI-A).
 """
 

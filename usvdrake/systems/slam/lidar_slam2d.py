@@ -1,6 +1,8 @@
 """``LidarSlam2D`` (Pham et al.'s sliding-window graph SLAM) and ``HectorSlam`` (Ueland 2017's
-Hector-style
-SLAM) on the station's ``lidar_scan``: one LeafSystem shell over interchangeable backends."""
+Hector-style SLAM) on the station's ``lidar_scan``: one LeafSystem shell over interchangeable
+backends."""
+
+import dataclasses
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -9,6 +11,7 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 from usvdrake.sensors.messages import LaserScan
 from usvdrake.systems.slam.graph_slam import GraphSlam, GraphSlamConfig, body_pose, compose
 from usvdrake.systems.slam.hector import HectorConfig, make_hector
+from usvdrake.systems.slam.scan_checks import usable_scan
 from usvdrake.systems.slam.slam_summary import Slam2DSummary, summarise_2d
 from usvdrake.worlds.world import OccupancyGrid
 
@@ -62,7 +65,8 @@ class LidarSlam2D(LeafSystem):
         # (GraphSlam only: the Hector backend has no odometry, Kohlbrecher 2011)
         self._odometry = self.DeclareVectorInputPort("odometry", 3) if graph else None
         self._slam = self.DeclareAbstractState(AbstractValue.Make(backend))
-        self._last = self.DeclareDiscreteState(BasicVector([-1.0]))
+        # [time of the last scan taken [s], scans refused as insane]
+        self._last = self.DeclareDiscreteState(BasicVector([-1.0, 0.0]))
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
         self.DeclarePeriodicUnrestrictedUpdateEvent(1.0, 0.5 * period, self._background)
         deps = {self.abstract_state_ticket(self._slam)}
@@ -92,12 +96,17 @@ class LidarSlam2D(LeafSystem):
         return context.get_abstract_state(self._slam).get_value()
 
     def _update(self, context, state):
-        scan = self._scan.Eval(context)
-        if (
-            scan.time <= context.get_discrete_state(self._last).GetAtIndex(0)
-            or scan.valid.sum() < 10
-        ):
-            return  # already seen, or the sensor's empty message before its first sweep
+        raw = self._scan.Eval(context)
+        last = context.get_discrete_state(self._last)
+        if not raw.time > last.GetAtIndex(0):
+            return  # already seen (a NaN stamp never counts as new)
+        scan = usable_scan(raw)
+        if scan is None:  # insane (a broken driver, a corrupted log): refused and counted
+            state.get_mutable_discrete_state(self._last).SetAtIndex(1, last.GetAtIndex(1) + 1)
+            state.get_mutable_discrete_state(self._last).SetAtIndex(0, raw.time)
+            return
+        if scan.valid.sum() < 10:
+            return  # the sensor's empty message before its first sweep
         slam = state.get_mutable_abstract_state(self._slam).get_value()
         if self._odometry is not None and self._odometry.HasValue(context):
             # the lidar's pose by odometry: the backend's poses are the lidar's
@@ -120,7 +129,9 @@ class LidarSlam2D(LeafSystem):
         value.set_value(self.slam(context).occupancy())
 
     def _calc_summary(self, context, value):
-        value.set_value(summarise_2d(self.slam(context), self._mount))
+        rejected = int(context.get_discrete_state(self._last).GetAtIndex(1))
+        summary = summarise_2d(self.slam(context), self._mount)
+        value.set_value(dataclasses.replace(summary, rejected_scans=rejected))
 
 
 class HectorSlam(LidarSlam2D):

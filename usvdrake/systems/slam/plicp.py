@@ -102,14 +102,11 @@ def solve_point_to_line(
         + |S|² − hᵀ S^A S^A h = 0.
 
     Pham et al.'s coefficient list is garbled in extraction: it writes hᵀ X h expanded through g
-    with
-    non-transposed off-diagonal blocks (−A⁻¹B where −Bᵀ A⁻ᵀ belongs), "1" for the identity, and
-    an undefined "T" in e (it is the identity: hᵀ S^A S^A h). We implement the form above, in
-    Pham et al.'s convention that A, B, D are blocks of 2M. Every real root gives a stationary
-    point;
-    we polish each root's θ by Newton steps on the reduced cost ½ uᵀ S u + hᵀ u,
-    u = (cos θ, sin θ), take the one of least cost (the global minimum is among them) and set
-    t = −A⁻¹ (g_t + B x_r).
+    with non-transposed off-diagonal blocks (−A⁻¹B where −Bᵀ A⁻ᵀ belongs), "1" for the identity, and
+    an undefined "T" in e (it is the identity: hᵀ S^A S^A h). We implement the form above, in Pham
+    et al.'s convention that A, B, D are blocks of 2M. Every real root gives a stationary point; we
+    polish each root's θ by Newton steps on the reduced cost ½ uᵀ S u + hᵀ u, u = (cos θ, sin θ),
+    take the one of least cost (the global minimum is among them) and set t = −A⁻¹ (g_t + B x_r).
 
     p, q, n: (N × 2) current points, reference points on the lines, line normals; w: (N,)
     weights (default 1). Needs at least two non-parallel normals (A invertible).
@@ -241,8 +238,7 @@ def plicp(
     (:func:`find_correspondences`, at most ``max_distance`` [m] away, segments at most
     ``max_segment`` [m] long), keeps the ``trim`` fraction with the least point-to-line error
     (trimmed ICP) and solves Pham et al. eq. 1 exactly with :func:`solve_point_to_line`. It stops
-    when
-    the correspondences repeat (the solve would return the same pose) or the step is below
+    when the correspondences repeat (the solve would return the same pose) or the step is below
     ``tolerance_t`` [m] and ``tolerance_theta`` [rad]. ``rotation_search`` first replaces the
     initial θ by :func:`coarse_rotation`. ``tree``: a prebuilt ``cKDTree(reference)``.
 

@@ -7,10 +7,8 @@ here it is a process).
 constraints, which loops GNC may reject); :func:`solve_pose_graph` builds the gtsam graph in
 the same order every time and solves it by Levenberg-Marquardt (gtsam, at most
 ``max_iterations`` steps, Pham et al. §V-A) or, with loop candidates, by graduated non-convexity
-with
-the truncated least squares loss (Yang et al. 2020, gtsam's ``GncLMOptimizer``). The same
-problem gives the same solution to the bit whether solved here or in :func:`worker`'s
-process.
+with the truncated least squares loss (Yang et al. 2020, gtsam's ``GncLMOptimizer``). The same
+problem gives the same solution to the bit whether solved here or in :func:`worker`'s process.
 """
 
 import atexit

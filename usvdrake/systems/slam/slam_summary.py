@@ -27,6 +27,7 @@ class Slam2DSummary:
     tracking_ms: np.ndarray = field(default_factory=lambda: np.zeros(0))  # [ms] per scan
     optimisation_ms: np.ndarray = field(default_factory=lambda: np.zeros(0))  # [ms] per window
     full_optimisation_ms: np.ndarray = field(default_factory=lambda: np.zeros(0))  # [ms]
+    rejected_scans: int = 0  # scans refused as insane (scan_checks.usable_scan)
 
 
 def summarise_2d(backend, mount=None) -> Slam2DSummary:

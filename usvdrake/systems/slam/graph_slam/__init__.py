@@ -27,8 +27,7 @@ the
   whole graph for optimisation, which :meth:`GraphSlam.optimise_pending` runs when the caller
   decides (its own slower event in ``LidarSlam2D``, so the per-scan update never stalls).
   For logs whose drift outgrows PLICP's basin (ours, not Pham et al.'s): ``loop_per_chain`` matches
-  one
-  node per earlier pass; ``loop_linear_window`` > 0 first searches the new node's recent scans
+  one node per earlier pass; ``loop_linear_window`` > 0 first searches the new node's recent scans
   against the candidate's neighbours by the correlative matcher and refuses fits that are weak
   (``min_loop_score``) or repeated elsewhere in the window (``max_loop_ambiguity``: corridors);
   ``loop_gnc`` makes loops Gaussian and lets each full optimisation reject inconsistent ones by
