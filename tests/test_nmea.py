@@ -303,8 +303,9 @@ def test_unknown_types_are_skipped_known_types_are_strict():
         "GPGGA,123519,4807.038,N,01131.000,E,1,08,inf,545.4,M,46.9,M,,",
         "GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,F,46.9,M,,",  # unit
         "GPGGA,123519,4807.038,N,01131.000,E,1,-8,0.9,545.4,M,46.9,M,,",
-        "GPRMC,123519,A,4807.038,N,01131.000,E,022.4,084.4,310223,003.1,W",  # 31 Feb
-        "GPRMC,123519,A,4807.038,N,01131.000,E,022.4,084.4,230394,003.1,",  # var w/o E/W
+        # (an RMC's invalid date or variation without E/W decodes to None instead: receiver
+        # quirks must not lose fixes -- tests/test_codec_worst_cases.py)
+        "GPRMC,123519,A,4807.038,X,01131.000,E,022.4,084.4,230394,003.1,W",  # hemisphere
         "GPRMC,123519,Q,4807.038,N,01131.000,E,022.4,084.4,230394,003.1,W",  # status
         "GPVTG,054.7,034.4,005.5,010.2",  # pre-NMEA-2 VTG layout: not supported
         "GPVTG,054.7,T,034.4,M,005.5,N,010.2,K,A,X",

@@ -8,6 +8,10 @@ speed over ground), for any talker id (``GP``, ``GN``, ``GL``, ``GA``, ``II``, `
   proprietary ``$P...`` and encapsulated ``!...`` sentences) with a valid checksum returns
   ``None``. A missing or wrong checksum, non-ASCII bytes, a wrong field count for a known type
   or a malformed field raise :class:`NmeaError` (a ``ValueError``) -- never another exception.
+  Exception (receiver quirks must not lose fixes): in RMC only the fix fields (time, status,
+  position with hemispheres, speed, course) are strict; a malformed date (e.g. after a GPS
+  week rollover), a magnetic variation without its hemisphere, or a malformed mode or
+  navigational status decode to ``None`` (unknown).
 * :func:`encode_gga`, :func:`encode_rmc`, :func:`encode_vtg` (or :func:`encode`) produce a
   complete sentence with checksum and ``\\r\\n``.
 * :func:`split_sentences` / :class:`NmeaStream` cut sentences out of an arbitrary byte stream.
@@ -94,8 +98,10 @@ class RMC:
     longitude_deg: float | None = None
     speed_over_ground_mps: float | None = None  #: from knots
     course_over_ground_deg: float | None = None  #: degrees true
-    date: _dt.date | None = None  #: UTC date (two-digit years: 80-99 -> 19xx, 00-79 -> 20xx)
-    magnetic_variation_deg: float | None = None  #: east positive (subtract from true course)
+    #: UTC date (two-digit years: 80-99 -> 19xx, 00-79 -> 20xx); None if empty or malformed
+    date: _dt.date | None = None
+    #: east positive (subtract from true course); None if empty, malformed or without E/W
+    magnetic_variation_deg: float | None = None
     mode: str | None = None  #: NMEA 2.3+ mode indicator (A, D, E, F, M, N, P, R, S)
     nav_status: str | None = None  #: NMEA 4.1 navigational status (A, S, C, U, V)
     talker: str = "GP"
@@ -289,24 +295,41 @@ def _decode_gga(talker: str, f: list[str]) -> GGA:
 def _decode_rmc(talker: str, f: list[str]) -> RMC:
     if len(f) not in (11, 12, 13):
         raise NmeaError(f"RMC: expected 11 to 13 fields, got {len(f)}")
-    var = _num(f[9], "RMC magnetic variation")
-    if var is not None or f[10] != "":
-        if var is None or f[10] not in ("E", "W"):
-            raise NmeaError(f"RMC: bad magnetic variation {f[9]!r},{f[10]!r}")
+    # Strict about the fields a fix needs; lenient about the rest (real receivers send a GPS
+    # week-rollover date such as "2208-1", a variation without its hemisphere, ...): a malformed
+    # date, magnetic variation, mode or navigational status decodes to None (unknown).
+    time_of_day_s = _time(f[0])
+    status = _letter(f[1], "RMC status", "AV")
+    latitude_deg = _angle(f[2], f[3], lat=True)
+    longitude_deg = _angle(f[4], f[5], lat=False)
+    speed = _scaled(f[6], "RMC speed", KNOT_TO_MPS)
+    course = _num(f[7], "RMC course")
+    var = _lenient(_num, f[9], "RMC magnetic variation")
+    if var is not None and f[10] in ("E", "W"):
         var = var if f[10] == "E" else -var
+    else:
+        var = None
     return RMC(
-        time_of_day_s=_time(f[0]),
-        status=_letter(f[1], "RMC status", "AV"),
-        latitude_deg=_angle(f[2], f[3], lat=True),
-        longitude_deg=_angle(f[4], f[5], lat=False),
-        speed_over_ground_mps=_scaled(f[6], "RMC speed", KNOT_TO_MPS),
-        course_over_ground_deg=_num(f[7], "RMC course"),
-        date=_date(f[8]),
+        time_of_day_s=time_of_day_s,
+        status=status,
+        latitude_deg=latitude_deg,
+        longitude_deg=longitude_deg,
+        speed_over_ground_mps=speed,
+        course_over_ground_deg=course,
+        date=_lenient(_date, f[8]),
         magnetic_variation_deg=var,
-        mode=_letter(f[11], "RMC mode") if len(f) > 11 else None,
-        nav_status=_letter(f[12], "RMC navigational status") if len(f) > 12 else None,
+        mode=_lenient(_letter, f[11], "RMC mode") if len(f) > 11 else None,
+        nav_status=_lenient(_letter, f[12], "RMC nav status") if len(f) > 12 else None,
         talker=talker,
     )
+
+
+def _lenient(parse, *args):
+    """``parse(*args)``, or None where the field is malformed."""
+    try:
+        return parse(*args)
+    except NmeaError:
+        return None
 
 
 def _decode_vtg(talker: str, f: list[str]) -> VTG:
@@ -521,37 +544,70 @@ def split_sentences(buffer: bytes, max_len: int = MAX_SENTENCE_LEN) -> tuple[lis
     are dropped, as is an unfinished tail already longer than that. Sentences are not checked
     here -- :func:`decode` verifies them. The result does not depend on how the stream was cut
     into reads.
+
+    Linear time in ``len(buffer)``: each line end is searched for once, not once per start
+    character, so a buffer of nothing but ``$`` costs no more than one of valid sentences.
     """
-    buffer = bytes(buffer)
+    out, rest, _, _ = _split(bytes(buffer), max_len)
+    return out, rest
+
+
+def _split(buffer: bytes, max_len: int) -> tuple[list[bytes], bytes, int, int]:
+    """:func:`split_sentences` plus the number of bytes dropped (anything but line ends outside
+    the returned sentences and the kept tail) and of over-long lines / tails dropped."""
     out: list[bytes] = []
+    kept = overlong = 0
     pos = 0
+    n_buf = len(buffer)
+    e_cached: int | None = -1  # first line end after the last search; None: no line end left
     while True:
         m = _START.search(buffer, pos)
         if m is None:
-            return out, b""
+            tail = b""
+            break
         start = m.start()
-        e = _END.search(buffer, start + 1)
-        n = _START.search(buffer, start + 1, e.start() if e else len(buffer))
-        if n is not None:  # truncated: another sentence starts before this one ends
-            pos = n.start()
+        if e_cached is not None and e_cached <= start:
+            em = _END.search(buffer, start + 1)
+            e_cached = em.start() if em else None
+        e = e_cached  # the first line end after start (each line end is found only once)
+        nm = _START.search(buffer, start + 1, n_buf if e is None else e)
+        if nm is not None:  # truncated: another sentence starts before this one ends
+            pos = nm.start()
             continue
         if e is None:
             tail = buffer[start:]
-            return out, (tail if len(tail) <= max_len else b"")
-        if e.start() - start <= max_len:
-            out.append(buffer[start : e.start()])
-        pos = e.end()
+            if len(tail) > max_len:
+                tail = b""
+                overlong += 1
+            break
+        if e - start <= max_len:
+            out.append(buffer[start:e])
+            kept += e - start
+        else:
+            overlong += 1
+        pos = e + 1
+    line_ends = buffer.count(b"\r") + buffer.count(b"\n")
+    return out, tail, n_buf - kept - len(tail) - line_ends, overlong
 
 
 class NmeaStream:
-    """Incremental splitter: ``feed(chunk)`` returns the sentences completed by that chunk."""
+    """Incremental splitter: ``feed(chunk)`` returns the sentences completed by that chunk.
+
+    Linear time, and at most ``max_len`` bytes kept between reads, whatever the input.
+    Counters: ``dropped_bytes`` (garbage between sentences, truncated and over-long sentences;
+    line ends are not counted) and ``overlong`` (lines longer than ``max_len`` dropped).
+    """
 
     def __init__(self, max_len: int = MAX_SENTENCE_LEN) -> None:
         self.max_len = max_len
         self._rest = b""
+        self.dropped_bytes = 0
+        self.overlong = 0
 
     def feed(self, data: bytes) -> list[bytes]:
-        sentences, self._rest = split_sentences(self._rest + bytes(data), self.max_len)
+        sentences, self._rest, dropped, overlong = _split(self._rest + bytes(data), self.max_len)
+        self.dropped_bytes += dropped
+        self.overlong += overlong
         return sentences
 
     @property

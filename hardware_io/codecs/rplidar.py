@@ -396,14 +396,23 @@ class RplidarScanAssembler:
     Nodes before the first start flag are an incomplete revolution and are dropped
     (``dropped_nodes``). A revolution is returned when the next start node arrives, or by
     :meth:`flush`. ``time`` passed to :meth:`add`/:meth:`feed` is the host receive time.
+
+    Bounded memory: a revolution that reaches ``max_nodes`` nodes without the next start flag
+    (default 16384, a few times the most a revolution holds -- 32 k samples/s at 5 Hz on the
+    fastest models, ~1.5 k in the legacy scan mode) is dropped (``overlong_revolutions``, its
+    nodes in ``dropped_nodes``), and nodes are dropped until the next start flag.
     """
 
-    def __init__(self):
+    def __init__(self, max_nodes: int = 16384):
+        if max_nodes < 1:
+            raise ValueError("max_nodes must be positive")
+        self.max_nodes = int(max_nodes)
         self._nodes: list[ScanNode] = []
         self._t_start: float | None = None
         self._t_last = 0.0
         self.revolutions = 0
         self.dropped_nodes = 0
+        self.overlong_revolutions = 0
 
     def add(self, node: ScanNode, time: float = 0.0) -> RplidarRevolution | None:
         out = None
@@ -417,6 +426,11 @@ class RplidarScanAssembler:
             self._t_start = float(time)
         elif self._t_start is None:
             self.dropped_nodes += 1
+            return None
+        elif len(self._nodes) >= self.max_nodes:  # start flag lost: not a revolution
+            self.overlong_revolutions += 1
+            self.dropped_nodes += len(self._nodes) + 1
+            self._nodes, self._t_start = [], None
             return None
         self._nodes.append(node)
         self._t_last = float(time)

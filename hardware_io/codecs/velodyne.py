@@ -393,9 +393,26 @@ class SweepAssembler:
     ``points`` are the measured points (exact firing azimuth, not the column's), one per filled
     cell; ``time`` is the last firing's time [s] past the hour of the first packet (timestamps
     are unwrapped across hour rollovers); ``point_time`` is from the sweep's first firing.
+
+    Bounded memory whatever the azimuths: a sweep still open after ``max_sweep_packets``
+    packets (default 1000, ~3x the most a revolution takes: 302 packets in dual-return mode at
+    the slowest 300 rpm) has no wrap -- a stalled motor, a constant or garbage azimuth -- and is
+    dropped (``overlong_sweeps``, its packets in ``dropped_packets``); the next sweep starts
+    afresh (its first part counts as partial, like the one after start-up).
     """
 
-    def __init__(self, resolution_deg: float = 0.2, cut_azimuth_deg: float = 0.0):
+    def __init__(
+        self,
+        resolution_deg: float = 0.2,
+        cut_azimuth_deg: float = 0.0,
+        max_sweep_packets: int = 1000,
+    ):
+        if max_sweep_packets < 1:
+            raise ValueError("max_sweep_packets must be positive")
+        self.max_sweep_packets = int(max_sweep_packets)
+        self.overlong_sweeps = 0
+        self.dropped_packets = 0
+        self._sweep_packets = 0  # packets contributing to the sweep in progress
         n = 360.0 / resolution_deg
         if resolution_deg <= 0 or abs(n - round(n)) > 1e-9:
             raise ValueError("resolution_deg must divide 360")
@@ -419,6 +436,11 @@ class SweepAssembler:
         if not isinstance(packet, Vlp16Packet):
             packet = decode_packet(packet)
         self.packets += 1
+        if self._sweep_packets >= self.max_sweep_packets:  # no wrap for far too long
+            self.overlong_sweeps += 1
+            self.dropped_packets += self._sweep_packets
+            self._parts, self._sweep_packets = [], 0
+            self._complete = False
         ts = packet.timestamp_us
         if self._last_ts is not None and ts < self._last_ts - US_PER_HOUR // 2:
             self._hours += 1  # top of the hour
@@ -448,6 +470,7 @@ class SweepAssembler:
     def _add(self, packet, use, fa, ft, lo: int, hi: int) -> None:
         if hi <= lo:
             return
+        self._sweep_packets += 1
         idx = np.arange(lo, hi)
         blk, f = use[idx // 2], idx % 2
         d = np.asarray(packet.distance)[blk[:, None], f[:, None] * LASERS + np.arange(LASERS)]
@@ -466,6 +489,7 @@ class SweepAssembler:
 
     def _finish(self, force: bool = False) -> PointCloud | None:
         parts, self._parts = self._parts, []
+        self._sweep_packets = 0
         if not parts:
             return None
         if not (self._complete or force):
