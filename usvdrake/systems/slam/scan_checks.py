@@ -29,7 +29,8 @@ def usable_scan(scan: LaserScan) -> LaserScan | None:
     ):
         return None
     range_max = min(float(scan.range_max), MAX_RANGE)  # NaN range_max fails the test above
-    sane = valid & np.isfinite(ranges) & (ranges > max(scan.range_min, 0.0)) & (ranges <= range_max)
+    # only what no lidar measures: a noisy return a little past range_max is a real one
+    sane = valid & np.isfinite(ranges) & (ranges > 0.0) & (ranges <= MAX_RANGE)
     if range_max == scan.range_max and np.array_equal(sane, valid):
         return scan  # the common case: nothing to clean, the very same message
     return dataclasses.replace(
