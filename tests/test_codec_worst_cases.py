@@ -18,17 +18,8 @@ import numpy as np
 import pytest
 
 from hardware_io.codecs import velodyne
-from hardware_io.codecs.nmea import (
-    GGA,
-    MAX_SENTENCE_LEN,
-    RMC,
-    NmeaError,
-    NmeaStream,
-    checksum,
-    decode,
-    encode,
-    split_sentences,
-)
+from hardware_io.codecs.nmea import GGA, RMC, NmeaError, checksum, decode, encode
+from hardware_io.codecs.nmea_stream import MAX_SENTENCE_LEN, NmeaStream, split_sentences
 from hardware_io.codecs.rplidar import RplidarScanAssembler, ScanNode
 from hardware_io.codecs.velodyne import SweepAssembler, Vlp16Packet
 

@@ -19,7 +19,6 @@ from hardware_io.codecs.nmea import (
     RMC,
     VTG,
     NmeaError,
-    NmeaStream,
     checksum,
     decode,
     encode,
@@ -27,8 +26,8 @@ from hardware_io.codecs.nmea import (
     encode_rmc,
     encode_vtg,
     quantise,
-    split_sentences,
 )
+from hardware_io.codecs.nmea_stream import NmeaStream, split_sentences
 
 DATA = Path(__file__).parent / "data" / "nmea"
 

@@ -7,7 +7,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from hardware_io.codecs.nmea import GGA, RMC, VTG, NmeaError, NmeaStream, decode
+from hardware_io.codecs.nmea import GGA, RMC, VTG, NmeaError, decode
+from hardware_io.codecs.nmea_stream import NmeaStream
 from hardware_io.systems.device_source import DeviceSource
 from hardware_io.transport import SerialTransport
 from usvdrake.sensors.geodesy import Datum, datum_by_name
