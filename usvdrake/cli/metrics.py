@@ -4,6 +4,7 @@ function the live run used), print the numbers, optionally write them as JSON.""
 import json
 from pathlib import Path
 
+from usvdrake.cli._format import table
 from usvdrake.errors import ConfigError
 from usvdrake.run.measure import metrics_from_log
 
@@ -23,11 +24,8 @@ def run(args) -> int:
         metrics = metrics_from_log(log)
     except ValueError as e:
         raise ConfigError(str(log), "", "a finished usvdrake mission log", str(e)) from None
-    width = max(len(k) for k in metrics)
     print(f"usvdrake metrics {log}: scenario {metrics['scenario']}, replayed from the log")
-    for key, value in metrics.items():
-        text = f"{value:.4g}" if isinstance(value, float) else str(value)
-        print(f"  {key:<{width}} {text}")
+    print("\n".join(table(metrics)))
     if args.out:
         out = Path(args.out)
         path = out / "metrics.json" if out.suffix != ".json" else out

@@ -1,5 +1,6 @@
 """``usvdrake slam2d``: 2D graph SLAM (Pham et al.) on recorded scans."""
 
+from usvdrake.cli._format import table
 from usvdrake.errors import ConfigError
 from usvdrake.run.slam2d import run_slam2d
 
@@ -86,13 +87,7 @@ def run(args) -> int:
         **({} if args.full_period is None else {"full_period": args.full_period}),
         **({} if args.full_budget is None else {"full_budget_ms_per_node": args.full_budget}),
     )
-    width = max(len(k) for k in metrics)
-    for key, value in metrics.items():
-        print(
-            f"  {key:<{width}} {value:.4g}"
-            if isinstance(value, float)
-            else f"  {key:<{width}} {value}"
-        )
+    print("\n".join(table(metrics)))
     files = "trajectory.tum, map.png, metrics.json" + (", ate.png" if args.reference else "")
     print(f"  {files} in {args.out}")
     return 0

@@ -10,7 +10,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from usvdrake.diagrams.variants import ESTIMATORS, AutonomyParts, Variant
+from usvdrake.diagrams.variants import ESTIMATORS, AutonomyParts, Variant, require_sensors
 from usvdrake.errors import ConfigError
 from usvdrake.scenario import Scenario
 from usvdrake.systems.estimation.imu_interval import ImuIntervalMean
@@ -53,13 +53,7 @@ def add_nmhe(parts: AutonomyParts):
 
 
 def check_nmhe(s: Scenario, file: str) -> None:
-    if "pose" not in s.sensors.enabled:
-        raise ConfigError(
-            file,
-            "sensors.enabled",
-            "'pose' in the list (the NMHE measures it)",
-            repr(s.sensors.enabled),
-        )
+    require_sensors(s, file, ("pose",), "the NMHE measures it")
 
 
 def add_slam_estimate(parts: AutonomyParts):

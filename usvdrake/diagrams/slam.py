@@ -11,7 +11,7 @@ iSAM2 on ``lidar_points``, ``imu`` and ``gps``. Each exports ``slam_pose``,
 
 from dataclasses import replace
 
-from usvdrake.diagrams.variants import SLAM_METHODS, AutonomyParts, Variant
+from usvdrake.diagrams.variants import SLAM_METHODS, AutonomyParts, Variant, require_sensors
 from usvdrake.errors import ConfigError
 from usvdrake.scenario import Scenario
 from usvdrake.sensors.lidar_model import sample_rate
@@ -66,13 +66,7 @@ def add_known_poses(parts: AutonomyParts):
 
 
 def check_lidar2d(s: Scenario, file: str) -> None:
-    if "lidar2d" not in s.sensors.enabled:
-        raise ConfigError(
-            file,
-            "sensors.enabled",
-            "'lidar2d' in the list (the SLAM reads it)",
-            repr(s.sensors.enabled),
-        )
+    require_sensors(s, file, ("lidar2d",), "the SLAM reads it")
 
 
 def check_known_poses(s: Scenario, file: str) -> None:
@@ -122,13 +116,7 @@ def add_factor_graph(parts: AutonomyParts):
 
 
 def check_factor_graph(s: Scenario, file: str) -> None:
-    if any(x not in s.sensors.enabled for x in ("lidar3d", "imu", "gps")):
-        raise ConfigError(
-            file,
-            "sensors.enabled",
-            "lidar3d, imu and gps in the list (the factor graph reads them)",
-            repr(s.sensors.enabled),
-        )
+    require_sensors(s, file, ("lidar3d", "imu", "gps"), "the factor graph reads them")
 
 
 def add_none(parts: AutonomyParts):

@@ -92,6 +92,15 @@ class AutonomyParts:
         return self.once("slam", lambda: SLAM_METHODS.get(method).add(self))
 
 
+def require_sensors(s: Scenario, file: str, names: tuple[str, ...], why: str) -> None:
+    """A variant's check that the scenario enables the sensors it reads (one line if not)."""
+    if any(n not in s.sensors.enabled for n in names):
+        wanted = " and ".join(names) if len(names) > 1 else f"'{names[0]}'"
+        raise ConfigError(
+            file, "sensors.enabled", f"{wanted} in the list ({why})", repr(s.sensors.enabled)
+        )
+
+
 def check_variants(s: Scenario, file: str = "scenario") -> Scenario:
     """The checks of the scenario's chosen sensors, estimator, controller and SLAM method (names
     must be registered). Returns ``s`` unchanged."""

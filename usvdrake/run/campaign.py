@@ -414,12 +414,7 @@ def outcome(row: dict) -> str:
 
 
 def is_success(row: dict) -> bool:
-    m = row.get("metrics") or {}
-    return (
-        row.get("status") == "completed"
-        and bool(m.get("mission_complete"))
-        and m.get("collision_samples", 0) == 0
-    )
+    return outcome(row) == "success"
 
 
 def _is_number(v) -> bool:

@@ -113,7 +113,7 @@ def run_fleet_mission(
         "seed": scenario.seed,
         "sim_time_s": float(t),
         "wall_time_s": float(wall),
-        "realtime_factor": float(t / wall) if wall > 0 else float("inf"),
+        "realtime_factor": outcome.realtime_factor,
         "all_served": bool(complete),
     }
     metrics.update(ledger.metrics())

@@ -34,7 +34,8 @@ from usvdrake.diagrams.hardware_station import close_hardware, hardware_metrics
 from usvdrake.diagrams.vessel_diagram import build_vessel_diagram
 from usvdrake.jsonable import jsonable
 from usvdrake.logs.mission_log import MissionLogWriter, add_mission_recorder
-from usvdrake.run.mission import final_values, run_mission
+from usvdrake.run.measure import final_values
+from usvdrake.run.mission import run_mission
 from usvdrake.run.simulate import simulate
 from usvdrake.scenario import Scenario, scenario_yaml
 from usvdrake.vessel import load_vessel

@@ -116,7 +116,7 @@ def run_mission(
         metrics[key] = value
         if key == "sim_time_s":
             metrics["wall_time_s"] = float(wall)
-            metrics["realtime_factor"] = float(t / wall) if wall > 0 else float("inf")
+            metrics["realtime_factor"] = outcome.realtime_factor
     times, states = signals["ground_truth_state"].times, signals["ground_truth_state"].values
     reference = signals["reference"].values
     thrust = signals["thrust_applied"].values

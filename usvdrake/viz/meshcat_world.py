@@ -131,12 +131,6 @@ def draw_occupancy(meshcat: Meshcat, grid, path: str = "/world/occupancy") -> No
     )
 
 
-def look_at(meshcat: Meshcat, target: np.ndarray, distance: float) -> None:
-    """Put the camera behind-above ``target`` (a 3-vector) at roughly ``distance`` [m]."""
-    eye = np.asarray(target, float) + distance * np.array([-0.45, -0.2, 0.87])
-    meshcat.SetCameraPose(eye, np.asarray(target, float))
-
-
 def view_bounds(points) -> tuple[float, float, float, float]:
     """``(xmin, ymin, xmax, ymax)`` of the (x, y) ``points`` with a margin around them."""
     xy = np.asarray(points, float).reshape(-1, 2)
