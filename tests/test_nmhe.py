@@ -23,7 +23,7 @@ from usvdrake.sensors.imu_model import ImuConfig
 from usvdrake.sensors.pose_sensor import PoseSensor, PoseSensorConfig, measure_pose, wrap_angle
 from usvdrake.sensors.thrust_sensor import ThrustSensor, ThrustSensorConfig, thrust_noise_scale
 from usvdrake.systems.estimation.imu_interval import ImuIntervalMean
-from usvdrake.systems.estimation.nmhe_model import NmheConfig, _thrust_model
+from usvdrake.systems.estimation.nmhe_model import NmheConfig, _thrust_model, screen_sample
 from usvdrake.systems.estimation.nmhe_problem import NmheProblem
 from usvdrake.systems.estimation.nmhe_system import Nmhe
 from usvdrake.systems.vessel.thrust_mixer import ThrustMixer
@@ -411,3 +411,40 @@ def test_failed_solves_are_counted_and_the_estimate_coasts(raise_error):
     assert np.abs(est[-1, :2] - truth[-1, :2]).max() < 0.1
     assert nmhe.diagnostics(nmhe.GetMyContextFromRoot(ctx))["failures"] == 10
     assert nmhe.diagnostics(nmhe.GetMyContextFromRoot(ok_ctx))["failures"] == 0
+
+
+# --- insane readings ----------------------------------------------------------------------------
+def test_insane_readings_are_screened_counted_and_bridged():
+    f = thrust_pattern(150)
+    q = simulate(f, [0.0, 0.0, 0.0, 0.6, 0.0, 0.0])
+    z, u = measure(q, f, noise=True, seed=3)
+    z[60, 0] = np.inf  # a broken x
+    z[61] = 1e300  # a corrupt record
+    z[62, 3] = -np.inf  # a broken gyro
+    u[70] = np.nan  # a thrust reading lost
+    u[71, 0] = 1e12  # a unit-confused force
+    problem = NmheProblem(XI, ROBOAT.thrusters, NmheConfig(thrust_delay_samples=0))
+    window, est, screened = problem.empty_window(), [], 0
+    for k in range(len(z)):
+        zk, uk, skipped = screen_sample(z[k], u[k], window.u[-1])
+        screened += skipped
+        window, sol = problem.step(window, zk, uk)
+        assert sol.success
+        est.append(sol.estimate)
+    est = np.array(est)
+    assert screened == 5
+    assert np.all(np.isfinite(est))
+    k = np.arange(WARM_UP, len(q))
+    assert np.abs(est[k, 3:5] - q[k, 3:5]).max() < 0.05
+
+
+def test_leaf_system_screens_non_finite_poses_and_counts_them():
+    nmhe = Nmhe(ROBOAT, initial_state=np.array([0.0, 0.0, 0.0, 0.5, 0.0, 0.0]))
+    sim = Simulator(nmhe)
+    ctx = sim.get_mutable_context()
+    nmhe.GetInputPort("pose_measurement").FixValue(ctx, [np.inf, 0.0, np.nan, 1e9])
+    nmhe.GetInputPort("thrust_measured").FixValue(ctx, [np.nan, 1e30, 0.0, 0.0])
+    sim.AdvanceTo(1.05)
+    diag = nmhe.GetOutputPort("nmhe_diagnostics").Eval(ctx)
+    assert diag[6] == diag[1] >= 10  # every sample screened
+    assert np.all(np.isfinite(nmhe.GetOutputPort("state_estimate").Eval(ctx)))

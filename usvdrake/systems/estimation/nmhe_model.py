@@ -16,6 +16,34 @@ from usvdrake.vessel import Thruster
 
 POSE_INDEX = [0, 1, 2, 5]  # C of h(q): z = [x y ψ r] picks these entries of q = [x y ψ u v r]
 
+# What no pose or thrust sensor of a surface vessel reports: positions beyond 1000 km of the
+# world's origin, turn rates above 20 rad/s, forces above 1 MN (a corrupt or unit-confused reading)
+MAX_POSITION_M = 1.0e6
+MAX_TURN_RATE = 20.0
+MAX_THRUST = 1.0e6
+
+
+def screen_sample(
+    z: np.ndarray, u: np.ndarray, u_last: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, bool]:
+    """(z, u, skipped): a pose sample z = [x y ψ r] and thrust reading u made safe for the
+    window. A pose value that is non-finite or beyond what a sensor reports becomes NaN (a
+    missing value, which the window bridges; an impossible position drops the whole pose); a
+    thrust reading with such a value is replaced by the last one. ``skipped``: something was."""
+    z = np.array(z, float).reshape(4)
+    u = np.array(u, float).reshape(-1)
+    bad = ~np.isfinite(z)
+    with np.errstate(invalid="ignore"):
+        if abs(z[0]) > MAX_POSITION_M or abs(z[1]) > MAX_POSITION_M:
+            bad[:] = True
+        if abs(z[3]) > MAX_TURN_RATE:
+            bad[3] = True
+        thrust_bad = not np.all(np.isfinite(u)) or np.any(np.abs(u) > MAX_THRUST)
+    z[bad] = np.nan
+    if thrust_bad:
+        u = np.array(u_last, float).reshape(-1)
+    return z, u, bool(bad.any() or thrust_bad)
+
 
 @dataclass
 class NmheConfig:

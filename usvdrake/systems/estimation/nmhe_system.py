@@ -5,12 +5,14 @@ import time
 import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from usvdrake.systems.estimation.nmhe_model import NmheConfig, NmheWindow
+from usvdrake.systems.estimation.nmhe_model import NmheConfig, NmheWindow, screen_sample
 from usvdrake.systems.estimation.nmhe_problem import NmheProblem
 from usvdrake.vessel import VesselParams
 
-# Diagnostics: [failures, solves, last solve [ms], max solve [ms], total solve time [ms], events]
+# Diagnostics: [failures, solves, last solve [ms], max solve [ms], total solve time [ms], events,
+# samples with a missing, non-finite or impossible pose / thrust value (screen_sample)]
 DIAG_FAILURES, DIAG_SOLVES, DIAG_LAST_MS, DIAG_MAX_MS, DIAG_TOTAL_MS, DIAG_EVENTS = range(6)
+DIAG_SCREENED = 6
 
 
 class Nmhe(LeafSystem):
@@ -60,7 +62,10 @@ class Nmhe(LeafSystem):
     window is full the estimator uses the samples it has (prior: ``initial_state``, else the
     first pose with zero velocity). A failed QP keeps the previous trajectory propagated by one
     sample and counts a failure; an exception in the solver additionally restarts the window
-    from the next sample. The estimator never stops the simulation.
+    from the next sample. Pose or thrust values that are non-finite or impossible never reach
+    the QP (:func:`~usvdrake.systems.estimation.nmhe_model.screen_sample`: a missing pose value,
+    the last thrust reading); such samples are counted (``nmhe_diagnostics[6]``). The estimator
+    never stops the simulation.
     """
 
     def __init__(
@@ -87,7 +92,7 @@ class Nmhe(LeafSystem):
         self._mem = self.DeclareDiscreteState(BasicVector(np.zeros(12)))
         q0 = np.zeros(6) if self._initial_state is None else self._initial_state
         self._est = self.DeclareDiscreteState(BasicVector(q0))
-        self._diag = self.DeclareDiscreteState(BasicVector(np.zeros(6)))
+        self._diag = self.DeclareDiscreteState(BasicVector(np.zeros(7)))
         self._est_time = self.DeclareDiscreteState(BasicVector([0.0]))
         self._lead = p.cfg.output_lead
         # at offset 0 the samples read are one period old (see Timing)
@@ -106,7 +111,7 @@ class Nmhe(LeafSystem):
             "nmhe_solve_ms", 1, self._calc_solve_ms, prerequisites_of_calc=diag_ticket
         )
         self.DeclareStateOutputPort("estimate_time", self._est_time)
-        # [failures, solves, last ms, max ms, total ms, update events]: what metrics report
+        # [failures, solves, last ms, max ms, total ms, update events, rejected samples]
         self.DeclareStateOutputPort("nmhe_diagnostics", self._diag)
 
     @property
@@ -138,6 +143,7 @@ class Nmhe(LeafSystem):
             "last_ms": float(d[DIAG_LAST_MS]),
             "max_ms": float(d[DIAG_MAX_MS]),
             "mean_ms": float(d[DIAG_TOTAL_MS]) / solves if solves else 0.0,
+            "screened": int(d[DIAG_SCREENED]),
         }
 
     def _update(self, context, discrete_state):
@@ -158,6 +164,10 @@ class Nmhe(LeafSystem):
                 imu_new = m[:3]
         estimate = context.get_discrete_state(self._est).CopyToVector()
         est_time = context.get_discrete_state(self._est_time).GetAtIndex(0)
+        if imu_new is not None and not np.all(np.isfinite(imu_new)):
+            imu_new = None  # a broken IMU mean is a missing one
+        z_new, u_new, skipped = screen_sample(z_new, u_new, window.u[-1])
+        d[DIAG_SCREENED] += skipped
         t_start = time.perf_counter()
         try:
             window, sol = p.step(window, z_new, u_new, self._initial_state, imu_new)
