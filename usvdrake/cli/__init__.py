@@ -2,16 +2,18 @@
 benchmark, ``identify`` ξ, run SLAM offline (``slam2d``, ``slam3d``, ``slam3d-ablation``).
 
 One module per subcommand (``usvdrake.cli.<module>``), each with ``add_arguments(parser)`` and
-``run(args) -> int``. This package imports only the standard library and
-:mod:`usvdrake.errors`: :func:`main` imports the one command module it dispatches to, so
-``usvdrake --help`` does not pull in Drake, gtsam or scipy.
+``run(args) -> int``. This package imports only the standard library, :mod:`usvdrake.errors` and
+:mod:`usvdrake.run.interrupt`: :func:`main` imports the one command module it dispatches to,
+so ``usvdrake --help`` does not pull in Drake, gtsam or scipy.
 """
 
 import argparse
 import importlib
+import signal
 import sys
 
 from usvdrake.errors import ConfigError
+from usvdrake.run.interrupt import stop_on_signals
 
 # (command, module in usvdrake.cli, one-line help)
 COMMANDS: tuple[tuple[str, str, str], ...] = (
@@ -72,7 +74,11 @@ def main(argv=None) -> int:
     command = _find_command(argv)
     args = make_parser(command).parse_args(argv)
     try:
-        return _command_module(args.command).run(args)
+        with stop_on_signals():  # SIGINT/SIGTERM: simulations stop and write their outputs
+            return _command_module(args.command).run(args)
     except ConfigError as e:
         print(f"usvdrake: error: {e}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # a second Ctrl-C, or a command that cannot stop cleanly
+        print(f"usvdrake {args.command}: interrupted", file=sys.stderr)
+        return 128 + signal.SIGINT

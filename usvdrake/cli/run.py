@@ -8,6 +8,7 @@ from usvdrake.cli._format import num
 from usvdrake.diagrams import load_scenario, with_overrides
 from usvdrake.errors import ConfigError
 from usvdrake.run.fleet import fleet_summary
+from usvdrake.run.interrupt import stop_reason, stop_signal
 from usvdrake.run.mission import run_mission
 from usvdrake.run.simulate import make_meshcat
 
@@ -20,6 +21,8 @@ def _summary(result, scenario) -> str:
     why = ""
     if not complete and m["sim_time_s"] >= scenario.duration - 1e-6:
         why = f" (stopped at the duration, {scenario.duration:g} s)"
+    elif m.get("interrupted"):
+        why = f" (interrupted by {m.get('interrupted_by')})"
     mission = f"  mission {'COMPLETE' if complete else 'NOT complete'}{why}: "
     mission += f"path {num(m['path_length_m'], '.1f', ' m')}"
     if m.get("final_distance_to_goal_m") is not None:
@@ -133,11 +136,15 @@ def run(args) -> int:
         print(fleet_summary(result.metrics, args.out))
     else:
         print(_summary(result, scenario))
+    if result.metrics.get("interrupted"):
+        print(
+            f"usvdrake run: interrupted by {stop_reason()} at t = "
+            f"{result.metrics['sim_time_s']:.1f} s; outputs written",
+            file=sys.stderr,
+        )
+        return 128 + stop_signal()
     if args.meshcat and sys.stdin.isatty():
         print("Meshcat stays up for the replay; press Ctrl-C to quit.")
-        try:
-            while True:
-                time.sleep(1.0)
-        except KeyboardInterrupt:
-            pass
+        while stop_signal() is None:  # Ctrl-C only asks to stop (usvdrake.run.interrupt)
+            time.sleep(0.2)
     return 0

@@ -114,8 +114,11 @@ def run_fleet_mission(
         "sim_time_s": float(t),
         "wall_time_s": float(wall),
         "realtime_factor": outcome.realtime_factor,
+        "interrupted": outcome.interrupted is not None,  # SIGINT / SIGTERM stopped it early
         "all_served": bool(complete),
     }
+    if outcome.interrupted is not None:
+        metrics["interrupted_by"] = outcome.interrupted
     metrics.update(ledger.metrics())
     pairs = separations(tracks, vessel)
     closest = min(pairs, key=lambda k: float(np.min(pairs[k])))

@@ -96,7 +96,8 @@ def run_mission(
         finals = final_values(vessel_diagram, context)
         if log_writer is not None:  # what a replay of the log needs to measure it again
             kept = {k: v for k, v in finals.items() if k != "reference_track"}  # rebuilt on replay
-            write_run_summary(log_writer, t, {**kept, "done": complete})
+            summary = {**kept, "done": complete, "interrupted": outcome.interrupted}
+            write_run_summary(log_writer, t, summary)
     finally:  # an interrupted or failed run still leaves a finished, readable log
         if log_writer is not None:
             log_writer.close()
@@ -117,6 +118,10 @@ def run_mission(
         if key == "sim_time_s":
             metrics["wall_time_s"] = float(wall)
             metrics["realtime_factor"] = outcome.realtime_factor
+            # SIGINT / SIGTERM stopped the run early: every output is still written
+            metrics["interrupted"] = outcome.interrupted is not None
+            if outcome.interrupted is not None:
+                metrics["interrupted_by"] = outcome.interrupted
     times, states = signals["ground_truth_state"].times, signals["ground_truth_state"].values
     reference = signals["reference"].values
     thrust = signals["thrust_applied"].values

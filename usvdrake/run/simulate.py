@@ -1,7 +1,8 @@
 """One simulation loop for every runner: mission, fleet and hardware-in-the-loop.
 
 :func:`simulate` applies the scenario's integrator settings, paces to the wall clock if asked,
-stops when a ``done`` port reads > 0 or the duration elapses, shows a progress bar and measures
+stops when a ``done`` port reads > 0, the duration elapses or SIGINT/SIGTERM asks it to
+(:mod:`usvdrake.run.interrupt`), shows a progress bar and measures
 the wall time. :func:`make_meshcat` and :func:`write_tum` are the small output helpers the
 runners share.
 """
@@ -17,6 +18,7 @@ from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator, Simula
 from pydrake.systems.framework import EventStatus
 from tqdm import tqdm
 
+from usvdrake.run.interrupt import stop_reason
 from usvdrake.scenario import SimulationConfig
 
 
@@ -55,6 +57,7 @@ class SimulationOutcome:
     sim_time: float  # [s] simulated time reached
     done: bool  # the done port fired (the run did not merely time out)
     wall_time: float  # [s] wall-clock time spent advancing
+    interrupted: str | None = None  # "SIGINT" / "SIGTERM": stopped early on request
 
     @property
     def realtime_factor(self) -> float:
@@ -98,15 +101,16 @@ def simulate(
         simulator.get_mutable_integrator().set_target_accuracy(settings.accuracy)
     simulator.set_target_realtime_rate(realtime_rate)
     context = simulator.get_mutable_context()
-    if done_system is not None:
-        port = done_system.GetOutputPort(done_port)
+    port = None if done_system is None else done_system.GetOutputPort(done_port)
 
-        def monitor(root_context):
-            if port.Eval(done_system.GetMyContextFromRoot(root_context))[0] > 0:
-                return EventStatus.ReachedTermination(diagram, reason)
-            return EventStatus.Succeeded()
+    def monitor(root_context):
+        if stop_reason() is not None:  # SIGINT / SIGTERM: stop at this step, outputs follow
+            return EventStatus.ReachedTermination(diagram, "interrupted")
+        if port is not None and port.Eval(done_system.GetMyContextFromRoot(root_context))[0] > 0:
+            return EventStatus.ReachedTermination(diagram, reason)
+        return EventStatus.Succeeded()
 
-        simulator.set_monitor(monitor)
+    simulator.set_monitor(monitor)
     bar = None
     if progress:
         bar = tqdm(
@@ -120,7 +124,7 @@ def simulate(
     t, done = 0.0, False
     try:
         simulator.Initialize()
-        while t < duration - 1e-9:
+        while t < duration - 1e-9 and stop_reason() is None:
             status = simulator.AdvanceTo(min(t + step, duration))
             new_t = context.get_time()
             if bar is not None:
@@ -129,9 +133,9 @@ def simulate(
                 bar.update(new_t - t)
             t = new_t
             if status.reason() == SimulatorStatus.ReturnReason.kReachedTerminationCondition:
-                done = True
+                done = stop_reason() is None
                 break
     finally:
         if bar is not None:
             bar.close()
-    return SimulationOutcome(simulator, t, done, time.perf_counter() - wall0)
+    return SimulationOutcome(simulator, t, done, time.perf_counter() - wall0, stop_reason())
