@@ -2,20 +2,35 @@
 
 :class:`SerialTransport` wraps a :class:`serial.Serial` (pyserial) port for polling from a
 periodic Drake event: :meth:`~SerialTransport.read` never blocks and returns whatever bytes are
-available together with the host time at which they were read. After an unplug (an ``OSError``
-or ``SerialException`` on read or write) the port is closed and later reads try to reopen it at
-most every ``reconnect_period`` seconds, returning ``b""`` meanwhile.
+available together with the host time at which they were read. After an unplug (EOF, EIO,
+a broken pipe: any ``OSError`` or ``SerialException`` on read or write) the port is closed, one
+warning line goes to stderr, and later reads and writes try to reopen it at most every
+``reconnect_period`` seconds (reads returning ``b""``, writes dropped meanwhile); a reopening
+that succeeds is announced by one more line. Both transports say how their link is with
+:class:`LinkCounters`.
 """
 
 from __future__ import annotations
 
 import os
 import socket
+import sys
 import time
+from dataclasses import dataclass
 
 import serial
 
-__all__ = ["PortNotFoundError", "SerialTransport"]
+__all__ = ["LinkCounters", "PortNotFoundError", "SerialTransport"]
+
+
+@dataclass(frozen=True)
+class LinkCounters:
+    """How a transport's link to its device is: ``connected`` now, ``disconnects`` (times the
+    device went away), ``reconnects`` (times it came back)."""
+
+    connected: bool = True
+    disconnects: int = 0
+    reconnects: int = 0
 
 
 class PortNotFoundError(OSError):
@@ -31,9 +46,12 @@ class SerialTransport:
 
     ``read() -> (bytes, host_time)``: the available bytes (``b""`` if none or while
     disconnected) and ``time.monotonic()`` right after the read. ``write(data)`` writes all of
-    ``data`` (dropped while disconnected). Counters: ``errors`` (I/O errors seen),
-    ``reconnects`` (successful reopenings after an error). A port that does not exist at
-    construction raises :class:`PortNotFoundError`.
+    ``data`` (dropped while disconnected, and what a full output buffer does not take).
+    Counters: ``errors`` (I/O errors seen), ``disconnects`` (times the port was lost: each
+    error closes it, so equal to ``errors``), ``reconnects`` (successful reopenings after an
+    error); :attr:`link` has them as :class:`LinkCounters`. ``close()`` is final: the port is
+    not reopened after it. A port that does not exist at construction raises
+    :class:`PortNotFoundError`.
     """
 
     def __init__(
@@ -47,6 +65,7 @@ class SerialTransport:
         self.reconnect_period = reconnect_period
         self.errors = 0
         self.reconnects = 0
+        self._closed = False
         self._last_attempt = -float("inf")
         if not os.path.exists(port):
             raise PortNotFoundError(port)
@@ -66,7 +85,15 @@ class SerialTransport:
     def connected(self) -> bool:
         return self._serial is not None
 
-    def _fail(self) -> None:
+    @property
+    def disconnects(self) -> int:
+        return self.errors
+
+    @property
+    def link(self) -> LinkCounters:
+        return LinkCounters(self.connected, self.disconnects, self.reconnects)
+
+    def _fail(self, error: BaseException) -> None:
         self.errors += 1
         self._last_attempt = time.monotonic()
         if self._serial is not None:
@@ -75,8 +102,17 @@ class SerialTransport:
             except (OSError, serial.SerialException):
                 pass
             self._serial = None
+        reason = getattr(error, "strerror", None) or str(error) or type(error).__name__
+        print(
+            f"warning: serial port {self.port} lost ({reason}); "
+            f"reopening it every {self.reconnect_period:g} s",
+            file=sys.stderr,
+            flush=True,
+        )
 
     def _try_reconnect(self) -> bool:
+        if self._closed:
+            return False
         now = time.monotonic()
         if now - self._last_attempt < self.reconnect_period:
             return False
@@ -86,6 +122,7 @@ class SerialTransport:
         except (OSError, serial.SerialException):
             return False
         self.reconnects += 1
+        print(f"warning: serial port {self.port} back", file=sys.stderr, flush=True)
         return True
 
     def read(self) -> tuple[bytes, float]:
@@ -94,8 +131,8 @@ class SerialTransport:
         try:
             n = self._serial.in_waiting
             data = self._serial.read(n) if n else b""
-        except (OSError, serial.SerialException):
-            self._fail()
+        except (OSError, serial.SerialException) as e:
+            self._fail(e)
             data = b""
         return bytes(data), time.monotonic()
 
@@ -104,12 +141,18 @@ class SerialTransport:
             return
         try:
             self._serial.write(data)
-        except (OSError, serial.SerialException):
-            self._fail()
+        except serial.SerialTimeoutException:
+            pass  # a full output buffer (device not reading) is not a lost device
+        except (OSError, serial.SerialException) as e:
+            self._fail(e)
 
     def close(self) -> None:
+        self._closed = True
         if self._serial is not None:
-            self._serial.close()
+            try:
+                self._serial.close()
+            except (OSError, serial.SerialException):
+                pass  # closing a port whose device has gone
             self._serial = None
 
     def __enter__(self) -> SerialTransport:
@@ -165,6 +208,12 @@ class UdpTransport:
     @property
     def connected(self) -> bool:
         return self._sock is not None
+
+    @property
+    def link(self) -> LinkCounters:
+        """A bound socket has no link to lose: an unplugged sensor just stops sending, which
+        the host watchdog sees as silence; so no disconnects or reconnects to count."""
+        return LinkCounters(self.connected)
 
     def read(self) -> tuple[list[bytes], float]:
         out: list[bytes] = []

@@ -130,6 +130,7 @@ def test_hardware_station_has_the_sim_station_ports_and_the_same_autonomy():
 
         # the devices' counters, read off the diagnostics ports (nothing received yet)
         metrics = hardware_metrics(hard, hard.CreateDefaultContext())
+        link = ["connected", "disconnects", "reconnects"]
         gps_keys = [f"gps_{f.name}" for f in dataclasses.fields(GpsSerialStatus)]
         imu_keys = [f"imu_{f.name}" for f in dataclasses.fields(ImuSerialStatus)]
         thruster_keys = [
@@ -143,8 +144,22 @@ def test_hardware_station_has_the_sim_station_ports_and_the_same_autonomy():
                 "stale_events",
             )
         ]
-        assert list(metrics) == gps_keys + imu_keys + thruster_keys
+        assert list(metrics) == [
+            *gps_keys,
+            *(f"gps_{k}" for k in link),
+            *imu_keys,
+            *(f"imu_{k}" for k in link),
+            *thruster_keys,
+            *(f"thruster_{k}" for k in link),
+            "device_disconnects",
+            "device_reconnects",
+            "devices_disconnected",
+            "watchdog_trips",
+            "watchdog_tripped",
+        ]
         assert metrics["gps_bytes_read"] == metrics["thruster_frames_sent"] == 0
+        assert metrics["device_disconnects"] == metrics["watchdog_trips"] == 0
+        assert metrics["devices_disconnected"] == []
     finally:
         close_hardware(hard)
         for dev in devices.values():

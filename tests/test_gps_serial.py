@@ -77,10 +77,11 @@ def _run(data: bytes):
         thread.join(timeout=5.0)
         sim.AdvanceTo(t + 0.1)  # everything read; one more update changes nothing
         fix = system.GetOutputPort("gps").Eval(ctx)
-        # the counters on the diagnostics port, for runners (a flat dict of the status)
+        # the counters on the diagnostics port, for runners (a flat dict of the status), and
+        # the port's link (never lost here)
         assert system.GetOutputPort("diagnostics").Eval(ctx) == dataclasses.asdict(
             system.status(ctx)
-        )
+        ) | {"connected": True, "disconnects": 0, "reconnects": 0}
         return fix, system.status(ctx)
     finally:
         system.close()

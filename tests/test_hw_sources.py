@@ -277,7 +277,12 @@ def test_imu_source_decodes_samples():
     assert st.requests_sent == 1 and dev.messages == 1  # GoToMeasurement reached the device
     assert st.samples >= 30 and st.samples == st.frames
     assert st.bad_frames == 0 and st.samples_lost == 0
-    assert diagnostics == dataclasses.asdict(st) and diagnostics["samples"] == st.samples
+    assert diagnostics == dataclasses.asdict(st) | {
+        "connected": True,
+        "disconnects": 0,
+        "reconnects": 0,
+    }
+    assert diagnostics["samples"] == st.samples
 
 
 def test_imu_source_survives_corruption():
@@ -449,7 +454,11 @@ def test_velodyne_source_decodes_sweeps():
     finally:
         source.close()
     assert st.datagrams == 5 * 75 and st.bad_packets == 0
-    assert diagnostics == dataclasses.asdict(st)
+    assert diagnostics == dataclasses.asdict(st) | {
+        "connected": True,
+        "disconnects": 0,
+        "reconnects": 0,
+    }  # UDP: never lost
     assert st.partial_sweeps == 1 and st.sweeps == 3  # the first is dropped, the last pending
     ref = clouds[st.sweeps].range_image  # sweep k completes when sweep k + 1 starts
     expected = np.where(np.isfinite(ref), np.rint(ref / 0.002) * 0.002, np.inf)

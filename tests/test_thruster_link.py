@@ -269,6 +269,7 @@ def test_round_trip_through_pty(thrusters, command):
         assert list(diagnostics) == [
             "telemetry_frames", "crc_errors", "frame_errors",
             "frames_sent", "neutral_frames", "stale_events",
+            "connected", "disconnects", "reconnects",
         ]  # fmt: skip
         assert diagnostics["telemetry_frames"] >= 2 and diagnostics["crc_errors"] == 0
         assert diagnostics["neutral_frames"] == diagnostics["stale_events"] == 0

@@ -4,7 +4,10 @@ A :class:`PtyDevice` is the device end of a pseudo-terminal: the host opens :att
 were a USB-serial adapter (``/dev/pts/N``) with :class:`hardware_io.transport.SerialTransport`,
 and the emulator reads and writes the master end through :meth:`read` / :meth:`write`, which
 never block. The slave end is put in raw mode so the line discipline passes bytes unchanged
-(no echo, no CR/LF translation) exactly as a real UART does.
+(no echo, no CR/LF translation) exactly as a real UART does. Given a ``link`` path, :attr:`path`
+is instead a symlink to the pseudo-terminal, as udev's ``/dev/serial/by-id`` names are: then
+:meth:`PtyDevice.unplug` makes the device disappear (the host reads EIO, the name is gone) and
+:meth:`PtyDevice.replug` brings it back under the same name, on a new pseudo-terminal.
 
 :class:`WireFaults` models a bad cable on the emulator side: each byte crossing the wire in
 either direction is replaced by a random byte with probability ``corruption``, and after
@@ -72,18 +75,49 @@ class PtyDevice:
 
     ``read()`` returns the bytes the host wrote (``b""`` if none), ``write(data)`` sends bytes
     to the host; both are non-blocking and pass through ``faults`` when given. Bytes written
-    while no host has the port open are discarded by the kernel like a UART with nothing
-    attached. ``close()`` releases both ends (the host then sees the device unplugged).
+    while no host has the port open, or while unplugged, are discarded like a UART's with
+    nothing attached. ``close()`` releases both ends (the host then sees the device unplugged)
+    and removes the link. With ``link``, :attr:`path` is that symlink and ``unplug()`` /
+    ``replug()`` take the device away and bring it back (:attr:`plugged`; ``unplugs`` counts
+    them); without it, :attr:`path` is the pseudo-terminal itself.
     """
 
-    def __init__(self, faults: WireFaults | None = None):
-        self._master, self._slave = os.openpty()
-        tty.setraw(self._slave)
-        os.set_blocking(self._master, False)
-        self.path = os.ttyname(self._slave)
+    def __init__(self, faults: WireFaults | None = None, link: str | os.PathLike | None = None):
         self.faults = faults
         self.bytes_in = 0
         self.bytes_out = 0
+        self.unplugs = 0
+        self._link = None if link is None else os.fspath(link)
+        self._master = self._slave = None
+        self._open()
+        self.path = self._link if self._link is not None else os.ttyname(self._slave)
+
+    def _open(self) -> None:
+        self._master, self._slave = os.openpty()
+        tty.setraw(self._slave)
+        os.set_blocking(self._master, False)
+        if self._link is not None:  # a new name in place of the old one, atomically
+            tmp = f"{self._link}.new"
+            os.symlink(os.ttyname(self._slave), tmp)
+            os.replace(tmp, self._link)
+
+    @property
+    def plugged(self) -> bool:
+        return self._master is not None
+
+    def unplug(self) -> None:
+        """The device goes away: both ends closed, the link removed."""
+        if self.plugged:
+            self.unplugs += 1
+        self.close()
+
+    def replug(self) -> None:
+        """The device comes back on a new pseudo-terminal under the same :attr:`path` (only with
+        a ``link``: a bare ``/dev/pts/N`` cannot be made again)."""
+        if self._link is None:
+            raise ValueError("replug needs a PtyDevice made with a link path")
+        if not self.plugged:
+            self._open()
 
     def read(self, max_bytes: int = 65536) -> bytes:
         if self._master is None:
@@ -123,6 +157,11 @@ class PtyDevice:
                 except OSError:
                     pass
         self._master = self._slave = None
+        if self._link is not None:
+            try:
+                os.unlink(self._link)
+            except FileNotFoundError:
+                pass
 
     def __enter__(self) -> PtyDevice:
         return self

@@ -1,19 +1,23 @@
 """The hardware-in-the-loop rig: the simulated boat behind real device protocols.
 
-``python -m hardware_io.emulators.rig SCENARIO [--corrupt P] [--report FILE]`` builds the
-scenario's *simulated* station (plant, environment, simulated sensors), puts a thruster
+``python -m hardware_io.emulators.rig SCENARIO [--corrupt P] [--report FILE] [--link-dir DIR]``
+builds the scenario's *simulated* station (plant, environment, simulated sensors), puts a thruster
 microcontroller, a GNSS receiver, an IMU and, when the scenario has a 2D lidar, an RPLIDAR A1 on
 pseudo-terminals in front of it (:mod:`hardware_io.emulators.device_systems`) and simulates it in
 real time. It prints one JSON line ``{"ready": true, "ports": {"thrusters": "/dev/pts/N", ...}}``
 on stdout; the host (``usvdrake hil``) opens those ports exactly as it would open the boat's USB
-serial adapters.
+serial adapters. With ``--link-dir`` the ports are stable names in that folder (symlinks to the
+pseudo-terminals, as ``/dev/serial/by-id`` names are), so a device can be unplugged and come
+back under the same name.
 
 The boat is moored (held at the scenario's initial state) until the microcontroller receives
 its first valid command frame, so the host's start-up time does not let it drift. Control
 lines on stdin: ``cut thrusters`` cuts the thruster wire (no byte crosses any more: the
-firmware watchdog must bring the propellers to neutral), ``stop`` (or end of stdin: the host
-died) ends the run and writes the report: the truth on the wall clock, the cut and watchdog
-times and every wire's byte counters.
+firmware watchdog must bring the propellers to neutral), ``unplug NAME`` / ``replug NAME``
+take a device away (the host reads EIO and its port name is gone) and bring it back (needs
+``--link-dir``), ``stop`` (or end of stdin: the host died) ends the run and writes the report:
+the truth on the wall clock, the cut and watchdog times, the unplugs and every wire's byte
+counters.
 """
 
 from __future__ import annotations
@@ -61,6 +65,7 @@ class Rig:
         corruption: float = 0.0,
         gps_rate_hz: float = 20.0,
         imu_rate_hz: float = 100.0,
+        link_dir: Path | None = None,
     ):
         self.scenario = scenario
         vessel = load_vessel(scenario.vessel)
@@ -70,7 +75,11 @@ class Rig:
             name: WireFaults(corruption, seed=scenario.seed * 10 + i)
             for i, name in enumerate(wires)
         }
-        self.ptys = {name: PtyDevice(self.faults[name]) for name in wires}
+        self.ptys = {
+            name: PtyDevice(self.faults[name], None if link_dir is None else Path(link_dir) / name)
+            for name in wires
+        }
+        self.plug_events: list[tuple[float, str, str]] = []  # (monotonic, device, action)
         azimuth = any(t.azimuth for t in vessel.thrusters)
         self.firmware = McuFirmware(len(vessel.thrusters), azimuth=azimuth)
 
@@ -157,6 +166,18 @@ class Rig:
         self.faults["thrusters"].cut()
         self.last_command_before_cut = self.firmware.last_command_time
 
+    def plug(self, device: str, action: str) -> None:
+        """``action`` = ``unplug`` / ``replug`` the wire named ``device``; an unknown device or
+        a replug without a link dir is refused with ValueError."""
+        if device not in self.ptys:
+            raise ValueError(f"no device {device!r} (the rig has {', '.join(self.ptys)})")
+        pty = self.ptys[device]
+        if action == "unplug":
+            pty.unplug()
+        else:
+            pty.replug()
+        self.plug_events.append((time.monotonic(), device, action))
+
     def report(self) -> dict:
         fw = self.firmware
         return {
@@ -165,6 +186,7 @@ class Rig:
             "cut_time": self.faults["thrusters"].cut_time,
             "last_command_before_cut": self.last_command_before_cut,
             "watchdog_trips": list(fw.trip_times),
+            "plug_events": [list(e) for e in self.plug_events],
             "mcu": {
                 "frames_ok": fw.frames_ok,
                 "frames_rejected": fw.frames_rejected,
@@ -216,9 +238,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--report", type=Path, help="write the JSON report here on stop")
     parser.add_argument("--gps-rate", type=float, default=20.0, help="[Hz] GGA rate")
     parser.add_argument("--imu-rate", type=float, default=100.0, help="[Hz] MTData2 rate")
+    parser.add_argument("--link-dir", type=Path, help="put the ports here as stable names")
     args = parser.parse_args(argv)
 
-    rig = Rig(load_scenario(args.scenario), args.corrupt, args.gps_rate, args.imu_rate)
+    rig = Rig(
+        load_scenario(args.scenario), args.corrupt, args.gps_rate, args.imu_rate, args.link_dir
+    )
     print(json.dumps({"ready": True, "ports": rig.ports()}), flush=True)
     control = _ControlLines(sys.stdin.fileno())
     try:
@@ -228,6 +253,13 @@ def main(argv: list[str] | None = None) -> int:
                 break
             if "cut thrusters" in lines:
                 rig.cut_thrusters()
+            for line in lines:
+                action, _, device = line.partition(" ")
+                if action in ("unplug", "replug"):
+                    try:
+                        rig.plug(device, action)
+                    except ValueError as e:  # a bad control line must not end the run
+                        print(f"rig: {line}: {e}", file=sys.stderr, flush=True)
             rig.step()
     finally:
         if args.report is not None:

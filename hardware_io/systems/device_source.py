@@ -9,6 +9,8 @@ from typing import Any, Generic, TypeVar
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
+from hardware_io.transport import LinkCounters
+
 __all__ = ["DeviceSource"]
 
 MessageT = TypeVar("MessageT")
@@ -28,8 +30,10 @@ class DeviceSource(LeafSystem, Generic[MessageT, StatusT]):
     status, in the order of declaration.
 
     The output port ``diagnostics`` is the status counters as a flat ``dict`` (field name →
-    value: :func:`dataclasses.asdict` of the status), so runners read them off a port, not off
-    the system.
+    value: :func:`dataclasses.asdict` of the status) followed by the transport's link
+    (``connected``, ``disconnects``, ``reconnects``: its
+    :class:`~hardware_io.transport.LinkCounters`, copied into abstract state at each update),
+    so runners read them off a port, not off the system.
 
     The transport and the protocol parsers' partial buffers are I/O and live on the system
     object, not in the Context. So contexts of a device source are not independent (all share
@@ -44,6 +48,7 @@ class DeviceSource(LeafSystem, Generic[MessageT, StatusT]):
         self.transport = transport
         self._message = self.DeclareAbstractState(AbstractValue.Make(message))
         self._status = self.DeclareAbstractState(AbstractValue.Make(status))
+        self._link_counters = self.DeclareAbstractState(AbstractValue.Make(LinkCounters()))
         self._polled = [self._message, self._status]
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
         self.DeclareStateOutputPort(port_name, self._message)
@@ -51,7 +56,10 @@ class DeviceSource(LeafSystem, Generic[MessageT, StatusT]):
             "diagnostics",
             lambda: AbstractValue.Make({}),
             self._calc_diagnostics,
-            {self.abstract_state_ticket(self._status)},
+            {
+                self.abstract_state_ticket(self._status),
+                self.abstract_state_ticket(self._link_counters),
+            },
         )
 
     def _declare_polled_state(self, value: Any):
@@ -67,11 +75,15 @@ class DeviceSource(LeafSystem, Generic[MessageT, StatusT]):
     def close(self) -> None:
         self.transport.close()
 
+    def link_counters(self, context) -> LinkCounters:
+        return context.get_abstract_state(self._link_counters).get_value()
+
     def _calc_diagnostics(self, context, output):
-        output.set_value(asdict(self.status(context)))
+        output.set_value(asdict(self.status(context)) | asdict(self.link_counters(context)))
 
     def _update(self, context, state):
         values = [context.get_abstract_state(i).get_value() for i in self._polled]
         updated = self.poll(context.get_time(), *values)
         for index, value in zip(self._polled, updated, strict=True):
             state.get_mutable_abstract_state(index).set_value(value)
+        state.get_mutable_abstract_state(self._link_counters).set_value(self.transport.link)

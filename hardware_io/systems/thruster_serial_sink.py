@@ -16,7 +16,7 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 
 from hardware_io import thrust_curve as tc
 from hardware_io.codecs import thrust as th
-from hardware_io.transport import SerialTransport
+from hardware_io.transport import LinkCounters, SerialTransport
 from usvdrake.systems.vessel.thrusters import command_size
 
 __all__ = ["LINK_FIELDS", "NO_TELEMETRY_AGE", "ThrusterLinkStatus", "ThrusterSerialSink"]
@@ -38,7 +38,7 @@ class ThrusterLinkStatus:
     """Link state of a :class:`ThrusterSerialSink` (abstract state, updated by its event).
 
     ``frames_sent``, ``neutral_frames`` and ``stale_events`` are copies of the sender thread's
-    counters taken at the last update.
+    counters taken at the last update, ``link`` of the transport's.
     """
 
     bytes_read: int = 0
@@ -52,6 +52,7 @@ class ThrusterLinkStatus:
     frames_sent: int = 0
     neutral_frames: int = 0
     stale_events: int = 0
+    link: LinkCounters = LinkCounters()
 
 
 class _CommandSender:
@@ -188,7 +189,10 @@ class ThrusterSerialSink(LeafSystem):
     * ``diagnostics`` (output, abstract): a dict of the link counters ``telemetry_frames``,
       ``crc_errors``, ``frame_errors`` (from the link status) and ``frames_sent``,
       ``neutral_frames``, ``stale_events`` (the sender thread's live counters, read at each
-      evaluation: the port is not cached).
+      evaluation: the port is not cached), and the port's link at the last update:
+      ``connected``, ``disconnects``, ``reconnects``
+      (:class:`~hardware_io.transport.LinkCounters`). An unplugged MCU is reopened by the
+      transport while the sender keeps writing; the frames meanwhile are dropped.
 
     The outputs depend on the state (and time) only, never directly on the input, so the
     system can sit in a feedback loop.
@@ -298,10 +302,11 @@ class ThrusterSerialSink(LeafSystem):
     def _update(self, context, state):
         t = context.get_time()
         st = context.get_abstract_state(self._status).get_value()
-        data = b""
+        data, link = b"", st.link
         if not self._closed:
             with self._io_lock:
                 data, _host_time = self.transport.read()
+                link = self.transport.link
         crc0, fe0 = self._parser.crc_errors, self._parser.frame_errors
         msgs = self._parser.feed(data) if data else []
         wrong = 0
@@ -330,6 +335,7 @@ class ThrusterSerialSink(LeafSystem):
             frames_sent=sent,
             neutral_frames=neutral,
             stale_events=stale,
+            link=link,
         )
         state.get_mutable_abstract_state(self._status).set_value(st)
 
@@ -359,6 +365,9 @@ class ThrusterSerialSink(LeafSystem):
                 "frames_sent": sent,
                 "neutral_frames": neutral,
                 "stale_events": stale,
+                "connected": st.link.connected,
+                "disconnects": st.link.disconnects,
+                "reconnects": st.link.reconnects,
             }
         )
 

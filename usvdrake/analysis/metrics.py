@@ -389,7 +389,8 @@ def control_estimation_metrics(
     if the vessel has neither). ``times``/``states``: ground truth samples; ``estimates``: the
     logged ``state_estimate`` at those times; ``finals``: the diagnostics ports' values at the
     end of the run (``nmpc_diagnostics`` = [solves, failures, median ms, p95 ms],
-    ``reference_track``, ``nmhe_diagnostics`` = [failures, solves, last, max, total ms, events, screened]);
+    ``reference_track``, ``nmhe_diagnostics`` = [failures, solves, last, max, total ms, events,
+    screened]);
     ``pose``: the logged pose measurements; ``nmhe_solve_ms``: the logged ``nmhe_solve_ms``;
     ``estimate_times``: the logged ``estimate_time`` (the instant each estimate refers to)."""
     out = {}

@@ -37,6 +37,7 @@ from usvdrake.worlds.world import World
 __all__ = [
     "close_hardware",
     "hardware_metrics",
+    "linked_devices",
     "make_hardware_station",
     "port_devices",
     "station_ports_for",
@@ -183,19 +184,40 @@ def close_hardware(diagram: Diagram) -> None:
             system.close()
 
 
+def linked_devices(vessel_diagram: Diagram) -> list[str]:
+    """The serial devices whose ``<device>_diagnostics`` port ``vessel_diagram`` exports, each
+    with its link (``connected``, ``disconnects``, ``reconnects``): those of
+    :data:`METRIC_PREFIXES` that are fitted, then ``thruster``."""
+    names = (*METRIC_PREFIXES, "thruster")
+    return [d for d in names if vessel_diagram.HasOutputPort(f"{d}_diagnostics")]
+
+
 def hardware_metrics(vessel_diagram: Diagram, context) -> dict:
     """The hardware devices' counters, read off the ``<device>_diagnostics`` output ports of
     ``vessel_diagram`` (a vessel diagram with a hardware station, or the station itself) in
     ``context`` (the root context of the diagram it is part of): ``gps_<counter>``,
     ``imu_<counter>``, ``lidar_<counter>`` (the 2D lidar) for each fitted device, then
     ``thruster_telemetry_frames``, ``thruster_crc_errors``, ``thruster_frame_errors``,
-    ``thruster_frames_sent``, ``thruster_neutral_frames``, ``thruster_stale_events``. Empty
-    for a diagram without them (a simulated station)."""
+    ``thruster_frames_sent``, ``thruster_neutral_frames``, ``thruster_stale_events``, each
+    device's link (``<prefix>_connected``, ``<prefix>_disconnects``, ``<prefix>_reconnects``)
+    and over all of them ``device_disconnects``, ``device_reconnects`` and
+    ``devices_disconnected`` (the devices still gone at the end); off ``watchdog_status``,
+    ``watchdog_trips`` (times the host watchdog zeroed the thrust) and ``watchdog_tripped``
+    (it still was at the end). Empty for a diagram without them (a simulated station)."""
     ctx = vessel_diagram.GetMyContextFromRoot(context)
-    out = {}
-    for device, prefix in (*METRIC_PREFIXES.items(), ("thruster", "thruster")):
-        port = f"{device}_diagnostics"
-        if vessel_diagram.HasOutputPort(port):
-            counters = vessel_diagram.GetOutputPort(port).Eval(ctx)
-            out.update({f"{prefix}_{key}": value for key, value in counters.items()})
+    out: dict = {}
+    links = {}
+    for device in linked_devices(vessel_diagram):
+        counters = vessel_diagram.GetOutputPort(f"{device}_diagnostics").Eval(ctx)
+        prefix = METRIC_PREFIXES.get(device, device)
+        out.update({f"{prefix}_{key}": value for key, value in counters.items()})
+        links[device] = counters
+    if links:
+        out["device_disconnects"] = sum(c["disconnects"] for c in links.values())
+        out["device_reconnects"] = sum(c["reconnects"] for c in links.values())
+        out["devices_disconnected"] = [d for d, c in links.items() if not c["connected"]]
+    if vessel_diagram.HasOutputPort("watchdog_status"):
+        tripped, _silent, trips = vessel_diagram.GetOutputPort("watchdog_status").Eval(ctx)
+        out["watchdog_trips"] = int(trips)
+        out["watchdog_tripped"] = bool(tripped)
     return out
