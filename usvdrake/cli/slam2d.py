@@ -1,5 +1,8 @@
 """``usvdrake slam2d``: 2D graph SLAM (Pham et al.) on recorded scans."""
 
+import json
+import sys
+
 from usvdrake.cli._format import table
 from usvdrake.errors import ConfigError
 from usvdrake.run.slam2d import run_slam2d
@@ -61,6 +64,7 @@ def add_arguments(m) -> None:
         "scan-only; a corrected log's pose fields are its reference, not odometry)",
     )
     m.add_argument("--quiet", action="store_true", help="no progress bar")
+    m.add_argument("--json", action="store_true", help="print the metrics as JSON instead")
 
 
 def run(args) -> int:
@@ -78,7 +82,7 @@ def run(args) -> int:
         args.reference,
         args.resolution,
         args.max_scans,
-        progress=not args.quiet,
+        progress=not (args.quiet or args.json),
         garbage=args.garbage,
         seed=args.seed,
         full_in_worker=not args.inline,
@@ -87,7 +91,10 @@ def run(args) -> int:
         **({} if args.full_period is None else {"full_period": args.full_period}),
         **({} if args.full_budget is None else {"full_budget_ms_per_node": args.full_budget}),
     )
-    print("\n".join(table(metrics)))
+    if args.json:
+        print(json.dumps(metrics, indent=2))
+    else:
+        print("\n".join(table(metrics)))
     files = "trajectory.tum, map.png, metrics.json" + (", ate.png" if args.reference else "")
-    print(f"  {files} in {args.out}")
+    print(f"  {files} in {args.out}", file=sys.stderr if args.json else None)
     return 0

@@ -78,11 +78,14 @@ def run(args) -> int:
         gps_topic=args.gps_topic,
     )
     if not result.metrics.get("lidar_messages"):
+        skipped = result.metrics.get("skipped_records", 0)
         raise ConfigError(
             str(args.log),
             "",
             "a recording with 3D lidar sweeps (/lidar_points or a PointCloud2 topic)",
-            "none (a 2D-only log? usvdrake slam2d reads those)",
+            f"none ({skipped} damaged records skipped)"
+            if skipped
+            else "none (a 2D-only log? usvdrake slam2d reads those)",
         )
     text = json.dumps(result.metrics, indent=2)
     if args.json:

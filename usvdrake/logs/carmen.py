@@ -14,21 +14,40 @@ odometry (equal in intel; fr079's laser sits 0.04 m ahead). Readings at or above
 have the same FLASER lines with SLAM-corrected poses, used as approximate ground truth.
 
 Files may be plain, bzip2 or gzip; the compression is recognised by its magic bytes.
+
+Damage (:class:`~usvdrake.logs.damage.ReadDamage`): a FLASER line that does not parse (cut
+short, a digit flipped into a letter, non-finite poses) and a line that is no CARMEN message at
+all (binary bytes, no message name) are skipped and counted; a compressed stream that breaks off
+(a truncated or corrupt ``.bz2`` / ``.gz``) keeps every line decoded before the break and
+counts the rest as one skip of the compressed bytes left unread. A file whose first bytes are
+not text is refused (:class:`ConfigError`).
 """
 
 import bisect
 import bz2
 import gzip
 import io
+import re
+import zlib
 from collections.abc import Iterator
 from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
 
+from usvdrake.errors import ConfigError
+from usvdrake.logs.damage import ReadDamage, count_into
 from usvdrake.sensors.messages import LaserScan
 
 FOV = np.pi  # [rad] FLASER field of view, first beam at −FOV/2
+# a CARMEN line: a comment, or a message name (ODOM, FLASER, PARAM, ROBOTLASER1, …) and fields
+_MESSAGE_LINE = re.compile(r"(#|[A-Z][A-Z0-9_]*(\s|$))")
+# bytes a text log never holds (control characters but tab, newline and carriage return, and
+# what ASCII decoding replaced)
+_NOT_TEXT = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\x7f\ufffd]")
+# what a broken bzip2 / gzip stream raises while it is read: corrupt data (OSError, zlib.error),
+# a stream that ends too soon (EOFError)
+STREAM_ERRORS = (OSError, EOFError, zlib.error)
 
 
 class CarmenScan(NamedTuple):
@@ -48,6 +67,17 @@ def open_log(path: str | Path) -> io.TextIOBase:
     return open(path, encoding="ascii", errors="replace")
 
 
+def _decompressed(raw) -> io.BufferedIOBase:
+    """``raw`` (a binary file), decompressed as its magic bytes say (it stays open after)."""
+    magic = raw.read(3)
+    raw.seek(0)
+    if magic == b"BZh":
+        return bz2.BZ2File(raw)
+    if magic[:2] == b"\x1f\x8b":
+        return gzip.GzipFile(fileobj=raw)
+    return raw
+
+
 def beam_increment(n: int) -> float:
     """Angle between FLASER beams [rad]: 180° over n beams, or over n − 1 when n is odd (361)."""
     return FOV / (n - n % 2)
@@ -65,6 +95,8 @@ def parse_flaser(tokens: list[str], pose: str = "odometry", max_range: float = 5
     r = np.array(tokens[2 : 2 + n], dtype=float)
     p = np.array(tokens[2 + n : 8 + n], dtype=float)
     timestamp = float(tokens[8 + n])
+    if not (np.isfinite(p).all() and np.isfinite(timestamp)):  # a corrupt line, not a scan
+        raise ValueError("FLASER line with a non-finite pose or time")
     valid = (r > 0.0) & (r < max_range)
     scan = LaserScan(
         time=timestamp,
@@ -85,24 +117,57 @@ def parse_flaser(tokens: list[str], pose: str = "odometry", max_range: float = 5
 
 
 def read_carmen(
-    path: str | Path, pose: str = "odometry", max_range: float = 50.0
+    path: str | Path,
+    pose: str = "odometry",
+    max_range: float = 50.0,
+    damage: ReadDamage | None = None,
 ) -> Iterator[CarmenScan]:
     """Yield ``(timestamp [s], LaserScan, pose (x, y, θ))`` for every FLASER line of a log.
 
     Scans come in file order: the ipc timestamps of the real logs are not strictly monotone
     (intel: 631 of 13 631 scans step back, by up to 0.9 s). Other messages (ODOM, PARAM, RLASER,
-    NEFF, comments) and malformed lines (a log truncated while recording) are skipped.
+    NEFF, comments) are passed over; malformed lines (a log truncated while recording, a
+    corrupt file) and the unreadable rest of a broken compressed stream are skipped and
+    counted in ``damage`` (the module's notes). ConfigError if the file is not text.
     """
     if pose not in ("odometry", "laser"):
         raise ValueError(f"pose must be 'odometry' or 'laser', got {pose!r}")
-    with open_log(path) as f:
-        for line in f:
-            if not line.startswith("FLASER"):
-                continue
-            try:
-                yield parse_flaser(line.split(), pose, max_range)
-            except (IndexError, ValueError):
-                continue  # a line cut short (log truncated while recording)
+    damage = count_into(damage)
+    for number, line in _lines(path, damage):
+        if not line.startswith("FLASER"):
+            if _NOT_TEXT.search(line) or (line.strip() and not _MESSAGE_LINE.match(line)):
+                damage.skip(path, number, "not a CARMEN line")
+            continue
+        try:
+            yield parse_flaser(line.split(), pose, max_range)
+        except (IndexError, ValueError):
+            damage.skip(path, number, "malformed FLASER line")
+
+
+def _lines(path: str | Path, damage: ReadDamage) -> Iterator[tuple[int, str]]:
+    """(line number, line) of a log up to where its compressed stream breaks, if it does (the
+    rest counted in ``damage``). ConfigError when not even the first line is text."""
+    try:
+        raw = open(path, "rb")  # closed by the with below
+    except OSError as e:
+        raise ConfigError(path, "", "a readable CARMEN log", e.strerror or str(e)) from None
+    number = 0
+    # the raw file's position says how much of a compressed log was read when it broke
+    with raw, io.TextIOWrapper(_decompressed(raw), encoding="ascii", errors="replace") as f:
+        try:
+            for number, line in enumerate(f, 1):
+                if number == 1 and _NOT_TEXT.search(line[:256]) and not _MESSAGE_LINE.match(line):
+                    raise ConfigError(path, "", "a CARMEN log (text, bzip2 or gzip)", "binary data")
+                yield number, line
+        except STREAM_ERRORS as e:
+            if number == 0:
+                raise ConfigError(
+                    path, "", "a CARMEN log (text, bzip2 or gzip)", f"a broken stream ({e})"
+                ) from None
+            unread = max(Path(path).stat().st_size - raw.tell(), 0)
+            damage.skip(
+                path, "stream", "broken compressed stream (the rest of the file unread)", unread
+            )
 
 
 def read_poses(path: str | Path, pose: str = "laser") -> tuple[np.ndarray, np.ndarray]:
@@ -118,14 +183,15 @@ def read_poses(path: str | Path, pose: str = "laser") -> tuple[np.ndarray, np.nd
 def read_odometry(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     """Timestamps (n,) [s] and odometry poses (n × 3) of the ODOM lines (none in mit-csail)."""
     stamps, poses = [], []
-    with open_log(path) as f:
-        for line in f:
-            if line.startswith("ODOM"):
+    for _, line in _lines(path, ReadDamage()):
+        if line.startswith("ODOM"):
+            try:
                 tokens = line.split()
-                if len(tokens) < 8:
-                    continue  # cut short
-                poses.append([float(v) for v in tokens[1:4]])
-                stamps.append(float(tokens[7]))
+                pose, stamp = [float(v) for v in tokens[1:4]], float(tokens[7])
+            except (IndexError, ValueError):
+                continue  # cut short or corrupt
+            poses.append(pose)
+            stamps.append(stamp)
     return np.array(stamps, dtype=float), np.array(poses, dtype=float).reshape(-1, 3)
 
 

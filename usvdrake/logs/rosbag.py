@@ -4,20 +4,57 @@
 ``sensor_msgs/msg/LaserScan`` message (of ``topic`` if given), stamped with the message header's
 time (the bag's receive time when the header stamp is zero). Ranges outside
 [range_min, range_max] or not finite are no-returns (``inf``, ``valid=False``), as ROS defines.
+
+Damage: a bag the ``rosbags`` package cannot open (garbage, a foreign or cut-off file) is
+refused with one line (:class:`ConfigError`); a message that does not deserialise or convert
+is skipped, and a bag whose messages stop being readable part-way ends there, both counted in
+a :class:`~usvdrake.logs.damage.ReadDamage` (:func:`open_bag`, :func:`bag_messages`).
 """
 
+import itertools
+import struct
+import zlib
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
-from rosbags.highlevel import AnyReader
-from rosbags.typesys import Stores, get_typestore
+from rosbags.highlevel import AnyReader, AnyReaderError
+from rosbags.rosbag1 import ReaderError as Ros1ReaderError
+from rosbags.rosbag2 import ReaderError as Ros2ReaderError
+from rosbags.serde import SerdeError
+from rosbags.typesys import Stores, TypesysError, get_typestore
 
+from usvdrake.logs.damage import ReadDamage, count_into
 from usvdrake.sensors.messages import LaserScan
 from usvdrake.typed_yaml import ConfigError
 
 LASER_SCAN = "sensor_msgs/msg/LaserScan"
+# what the rosbags package raises on damaged bytes: its own errors, and what its parsers hit in
+# bytes they do not check (short structs, bad UTF-8, indexes and sizes out of range, broken
+# bz2 / lz4 chunks: OSError, EOFError, RuntimeError; a message's time that does not match its
+# index entry: an assert in rosbag1's reader)
+BAG_ERRORS = (
+    AssertionError,
+    AnyReaderError,
+    Ros1ReaderError,
+    Ros2ReaderError,
+    SerdeError,
+    TypesysError,
+    struct.error,
+    zlib.error,
+    ValueError,
+    KeyError,
+    IndexError,
+    TypeError,
+    AttributeError,
+    OverflowError,
+    MemoryError,
+    OSError,
+    EOFError,
+    RuntimeError,
+)
 
 
 class BagScan(NamedTuple):
@@ -33,8 +70,9 @@ def is_bag(path: str | Path) -> bool:
 
 def to_laser_scan(msg, stamp: float) -> LaserScan:
     """A ROS LaserScan message as our :class:`LaserScan`."""
-    r = np.asarray(msg.ranges, dtype=float)
-    valid = np.isfinite(r) & (r >= msg.range_min) & (r <= msg.range_max)
+    with np.errstate(invalid="ignore"):  # NaN ranges are no-returns, not worth a warning
+        r = np.asarray(msg.ranges, dtype=float)
+        valid = np.isfinite(r) & (r >= msg.range_min) & (r <= msg.range_max)
     return LaserScan(
         time=stamp,
         angle_min=float(msg.angle_min),
@@ -48,11 +86,57 @@ def to_laser_scan(msg, stamp: float) -> LaserScan:
     )
 
 
-def read_bag_scans(path: str | Path, topic: str | None = None) -> Iterator[BagScan]:
+def _one_line(e: BaseException) -> str:
+    text = " ".join(str(e).split())[:200]
+    return f"{type(e).__name__}: {text}" if text else type(e).__name__
+
+
+@contextmanager
+def open_bag(path: Path, store: Stores):
+    """An open :class:`AnyReader` of a bag (``store``: the types of a bag that carries no
+    message definitions); ConfigError, one line, if the bag cannot be opened."""
+    try:
+        reader = AnyReader([path], default_typestore=get_typestore(store))
+        reader.open()
+    except BAG_ERRORS as e:
+        raise ConfigError(path, "", "a readable ROS bag", _one_line(e)) from None
+    try:
+        yield reader
+    finally:
+        reader.close()
+
+
+def bag_messages(reader, connections, path, damage: ReadDamage, convert):
+    """``convert(connection, bag time [ns], message)`` of every message of ``connections``
+    that deserialises and converts; the others skipped and counted in ``damage``, and the
+    rest of the bag when reading it breaks off."""
+    it = reader.messages(connections=connections)
+    for i in itertools.count():
+        try:
+            conn, t_bag, raw = next(it)
+        except StopIteration:
+            return
+        except BAG_ERRORS as e:  # the reader cannot go on: what it read stays
+            damage.skip(path, ("bag", i), f"unreadable rest of the bag ({type(e).__name__})")
+            return
+        try:
+            out = convert(conn, t_bag, reader.deserialize(raw, conn.msgtype))
+        except BAG_ERRORS:
+            damage.skip(path, ("bag", i), f"corrupt {conn.topic} message")
+            continue
+        yield out
+
+
+def read_bag_scans(
+    path: str | Path, topic: str | None = None, damage: ReadDamage | None = None
+) -> Iterator[BagScan]:
+    """The LaserScan messages of a bag (of ``topic`` if given) as :class:`BagScan` records;
+    damage skipped and counted in ``damage`` (module doc)."""
     path = Path(path)
+    damage = count_into(damage)
     if not is_bag(path):
         raise ConfigError(path, "", "a ROS 1 .bag file or a ROS 2 bag folder", "neither")
-    with AnyReader([path], default_typestore=get_typestore(Stores.ROS1_NOETIC)) as reader:
+    with open_bag(path, Stores.ROS1_NOETIC) as reader:
         conns = [
             c
             for c in reader.connections
@@ -62,8 +146,12 @@ def read_bag_scans(path: str | Path, topic: str | None = None) -> Iterator[BagSc
             found = sorted({f"{c.topic} ({c.msgtype})" for c in reader.connections})
             wanted = f"LaserScan messages on {topic}" if topic else "LaserScan messages"
             raise ConfigError(path, "", wanted, "only " + (", ".join(found) or "no messages"))
-        for conn, t_bag, raw in reader.messages(connections=conns):
-            msg = reader.deserialize(raw, conn.msgtype)
-            stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
-            stamp = stamp if stamp > 0 else 1e-9 * t_bag
-            yield BagScan(stamp, to_laser_scan(msg, stamp))
+        yield from bag_messages(reader, conns, path, damage, _bag_scan)
+
+
+def _bag_scan(conn, t_bag: int, msg) -> BagScan:
+    stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+    stamp = stamp if stamp > 0 else 1e-9 * t_bag
+    if not np.isfinite([stamp, msg.angle_min, msg.angle_increment]).all():
+        raise ValueError(f"{conn.topic}: a scan with a non-finite time or angle")
+    return BagScan(stamp, to_laser_scan(msg, stamp))

@@ -47,11 +47,12 @@ from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
-from rosbags.highlevel import AnyReader
-from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys import Stores
 
+from usvdrake.logs.damage import ReadDamage, count_into
 from usvdrake.logs.mission_log import log_summary, read_log_states, read_mission_log
-from usvdrake.logs.rosbag import is_bag
+from usvdrake.logs.mission_log.reader import sane_time
+from usvdrake.logs.rosbag import bag_messages, is_bag, open_bag
 from usvdrake.sensors.messages import GpsFix, ImuSample, PointCloud
 from usvdrake.systems.slam.lidar_features import (
     azimuth_column,
@@ -115,12 +116,16 @@ def _time_ordered(messages: Iterator[SensorMessage], window: float) -> Iterator[
 
 # --- mission logs -----------------------------------------------------------------------------
 def _mission_log_topics(
-    path: Path, lidar_topic: str | None, imu_topic: str | None, gps_topic: str | None
+    path: Path,
+    lidar_topic: str | None,
+    imu_topic: str | None,
+    gps_topic: str | None,
+    damage: ReadDamage,
 ) -> dict[str, str]:
     """{topic: kind} to read from a mission log; ConfigError if a requested topic is missing or
     there is none of the three."""
     asked = {"lidar": lidar_topic, "imu": imu_topic, "gps": gps_topic}
-    have = log_summary(path)["topics"]
+    have = log_summary(path, damage)["topics"]
     topics: dict[str, str] = {}
     for kind, topic in asked.items():
         t = topic or MISSION_TOPICS[kind]
@@ -128,19 +133,29 @@ def _mission_log_topics(
         if found:
             topics.update(dict.fromkeys(found, kind))
         elif topic is not None:
-            raise ConfigError(path, "", f"{kind} messages on {topic}", _found_mission(have))
+            got = _found_mission(have) + damage.note()
+            raise ConfigError(path, "", f"{kind} messages on {topic}", got)
     if not topics:
         wanted = ", ".join(MISSION_TOPICS.values())
-        raise ConfigError(path, "", f"sensor messages on {wanted}", _found_mission(have))
+        got = _found_mission(have) + damage.note()
+        raise ConfigError(path, "", f"sensor messages on {wanted}", got)
     return topics
 
 
-def _mission_log_messages(path: Path, topics: dict[str, str]) -> Iterator[SensorMessage]:
+def _mission_log_messages(
+    path: Path, topics: dict[str, str], damage: ReadDamage
+) -> Iterator[SensorMessage]:
+    """The sensor messages of a mission log; one of another type than its topic's, or whose
+    time is not finite or not its log time (what a corrupt record that still decodes can be),
+    skipped and counted."""
     types = {"lidar": PointCloud, "imu": ImuSample, "gps": GpsFix}
-    for topic, _, msg in read_mission_log(path, list(topics), log_time_order=False):
+    messages = read_mission_log(path, list(topics), log_time_order=False, damage=damage)
+    for i, (topic, log_time, msg) in enumerate(messages):
         kind = topics[topic]
-        if isinstance(msg, types[kind]):
-            yield SensorMessage(float(msg.time), kind, msg)
+        if not isinstance(msg, types[kind]) or not sane_time(log_time, msg):
+            damage.skip(path, ("sensor message", i), f"corrupt {topic} message")
+            continue
+        yield SensorMessage(float(msg.time), kind, msg)
 
 
 def _found_mission(topics: dict) -> str:
@@ -304,7 +319,7 @@ def _open_bag(path: Path):
     # used only for bags without message definitions (ROS 2 bags before Iron): ROS 1 bags
     # carry them, and ROS 1 and ROS 2 std_msgs/Header differ (seq)
     store = Stores.ROS1_NOETIC if path.suffix == ".bag" else Stores.ROS2_HUMBLE
-    return AnyReader([path], default_typestore=get_typestore(store))
+    return open_bag(path, store)
 
 
 def _bag_topics(path: Path, topics: dict[str, str | None]) -> dict[tuple[str, str], str]:
@@ -333,20 +348,24 @@ def _bag_messages(
     plan: dict[tuple[str, str], str],
     elevations: np.ndarray | None,
     columns: int,
+    damage: ReadDamage,
 ) -> Iterator[SensorMessage]:
+    def convert(conn, t_bag: int, msg) -> SensorMessage:
+        stamp = _stamp(msg, t_bag)
+        kind = plan[(conn.topic, conn.msgtype)]
+        if kind == "lidar":
+            out = to_point_cloud(msg, stamp, elevations, columns)
+        elif kind == "imu":
+            out = to_imu_sample(msg, stamp)
+        else:
+            out = to_gps_fix(msg, stamp)
+        if not np.isfinite(out.time):  # a corrupt stamp
+            raise ValueError(f"{conn.topic}: a message with a non-finite time")
+        return SensorMessage(float(out.time), kind, out)
+
     with _open_bag(path) as reader:
         conns = [c for c in reader.connections if (c.topic, c.msgtype) in plan]
-        for conn, t_bag, raw in reader.messages(connections=conns):
-            msg = reader.deserialize(raw, conn.msgtype)
-            stamp = _stamp(msg, t_bag)
-            kind = plan[(conn.topic, conn.msgtype)]
-            if kind == "lidar":
-                out = to_point_cloud(msg, stamp, elevations, columns)
-            elif kind == "imu":
-                out = to_imu_sample(msg, stamp)
-            else:
-                out = to_gps_fix(msg, stamp)
-            yield SensorMessage(float(out.time), kind, out)
+        yield from bag_messages(reader, conns, path, damage, convert)
 
 
 # --- API --------------------------------------------------------------------------------------
@@ -358,6 +377,7 @@ def read_sensor_stream(
     elevations: np.ndarray | None = None,
     columns: int = 1800,
     reorder_window: float = 2.0,
+    damage: ReadDamage | None = None,
 ) -> Iterator[SensorMessage]:
     """The lidar sweeps, IMU samples and GNSS fixes of a mission log or ROS bag, in time order.
 
@@ -378,6 +398,9 @@ def read_sensor_stream(
     reorder_window
         [s] how far a message may be recorded after a newer one and still come out in order
         (:func:`_time_ordered`); the buffer holds this much of the recording.
+    damage
+        Where the records a damaged file made the readers skip are counted (filled as the
+        messages are read; :class:`~usvdrake.logs.damage.ReadDamage`).
 
     Yields
     ------
@@ -390,15 +413,18 @@ def read_sensor_stream(
     ConfigError
         (a ValueError) naming the path and what was expected: the path is neither a mission log
         nor a bag, a requested topic is missing (listing the topics and types there are), or
-        there are no sensor messages at all. Raised by the call, before any message is read.
+        there are no sensor messages at all; or the file cannot be read at all (garbage, a
+        bag the reader cannot open). Raised by the call, before any message is read.
     """
     p = Path(path)
+    damage = count_into(damage)
     if is_bag(p):
         topics = {"lidar": lidar_topic, "imu": imu_topic, "gps": gps_topic}
-        it = _bag_messages(p, _bag_topics(p, topics), elevations, columns)
+        it = _bag_messages(p, _bag_topics(p, topics), elevations, columns, damage)
     else:
         log = _require_mission_log(p)
-        it = _mission_log_messages(log, _mission_log_topics(log, lidar_topic, imu_topic, gps_topic))
+        asked = _mission_log_topics(log, lidar_topic, imu_topic, gps_topic, damage)
+        it = _mission_log_messages(log, asked, damage)
     return _time_ordered(it, reorder_window)
 
 
@@ -416,15 +442,16 @@ def _require_mission_log(p: Path) -> Path:
 
 
 def read_ground_truth(
-    path: str | Path, topic: str = "/ground_truth"
+    path: str | Path, topic: str = "/ground_truth", damage: ReadDamage | None = None
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """(times [s], states n × 6 [x y ψ u v r]) of a mission log's ``topic`` (simulation ground
     truth; :func:`~usvdrake.logs.mission_log.read_log_states`), or None when there is none (a
-    hardware run's log, or a ROS bag). ConfigError if ``path`` is neither."""
+    hardware run's log, or a ROS bag). ConfigError if ``path`` is neither. ``damage``: where
+    damaged records are counted."""
     p = Path(path)
     if is_bag(p):
         return None
     log = _require_mission_log(p)
-    if topic not in log_summary(log)["topics"]:
+    if topic not in log_summary(log, damage)["topics"]:
         return None
-    return read_log_states(log, topic)
+    return read_log_states(log, topic, damage)

@@ -24,6 +24,7 @@ from usvdrake.analysis.trajectory_metrics import (
     write_tum,
 )
 from usvdrake.logs.carmen import associate_scans, read_carmen
+from usvdrake.logs.damage import ReadDamage
 from usvdrake.logs.mission_log import read_log_scans, read_log_states
 from usvdrake.logs.rosbag import is_bag, read_bag_scans
 from usvdrake.systems.slam.graph_slam import GraphSlam, GraphSlamConfig, compose
@@ -283,14 +284,15 @@ def run_slam2d(
     meaningless on a "corrected" log, whose pose fields are the reference itself."""
     log = Path(log)
     base = STREAM_CONFIG
+    damage = ReadDamage()  # what a damaged log made the reader skip (metrics: skipped_records)
     if log.suffix == ".mcap":
-        scans = read_log_scans(log)
+        scans = read_log_scans(log, damage=damage)
     elif is_bag(log):
-        scans = list(read_bag_scans(log))
+        scans = list(read_bag_scans(log, damage=damage))
     elif log.is_file():
         # the laser's pose fields: the odometry's pose of the laser itself (in fr079 0.04 m ahead
         # of the robot's odom fields), which only --odometry reads
-        scans = list(read_carmen(log, pose="laser"))
+        scans = list(read_carmen(log, pose="laser", damage=damage))
         base = LOG_CONFIG
     else:
         raise ConfigError(
@@ -301,7 +303,7 @@ def run_slam2d(
     if max_scans:
         scans = scans[:max_scans]
     if not scans:
-        raise ConfigError(log, "", "laser scans", "none")
+        raise ConfigError(log, "", "laser scans", "none" + damage.note())
     clean = scans  # the reference names scans by their ranges, garbage or not
     corrupted = np.zeros(0, int)
     if garbage > 0:
@@ -344,6 +346,8 @@ def run_slam2d(
         "log": str(log),
         "scans": len(scans),
         "garbage_scans": len(corrupted),
+        # records of a damaged log left out, bytes it could not read, and why (ReadDamage)
+        **damage.metrics(),
         "odometry": odometry,  # False: scan-only
         # (distance, turn) factors the scans calibrated the odometry by (GraphSlam.odometry_scale)
         "odometry_scale": list(slam.odometry_scale) if odometry else None,
@@ -358,8 +362,9 @@ def run_slam2d(
         # time they and their optimisation took after the last scan (in wall_time_s)
         "relinks": int(slam.stats.get("relinks", 0)),
         "relink_s": float(slam.stats.get("relink_ms", 0.0) / 1e3),
-        "tracking_ms_median": float(np.median(track)),
-        "tracking_ms_p95": float(np.percentile(track, 95)),
+        # None: no scan was tracked (every one without enough returns to match)
+        "tracking_ms_median": float(np.median(track)) if len(track) else None,
+        "tracking_ms_p95": float(np.percentile(track, 95)) if len(track) else None,
         "full_optimisations": len(slam.stats["full_optimisation_ms"]),
         "full_period_s": full_period,
         "full_optimisation_ms_max": float(max(slam.stats["full_optimisation_ms"], default=0.0)),

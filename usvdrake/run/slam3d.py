@@ -32,6 +32,7 @@ from tqdm import tqdm
 
 from usvdrake.analysis.metrics import slam3d_counts, slam3d_metrics
 from usvdrake.analysis.trajectory_metrics import write_tum, xyz_quat_from_se3
+from usvdrake.logs.damage import ReadDamage
 from usvdrake.logs.sensor_stream import SensorMessage, read_ground_truth, read_sensor_stream
 from usvdrake.sensors.geodesy import LocalFrame
 from usvdrake.systems.slam.factor_graph_slam import MIN_CLOUD_POINTS, mount_matrix
@@ -159,8 +160,9 @@ def run_slam3d(
         The path is not a recording, a topic is missing, or there are no sensor messages.
     """
     path = Path(path)
-    stream = read_sensor_stream(path, lidar_topic, imu_topic, gps_topic)
-    truth = read_ground_truth(path)
+    damage = ReadDamage()  # what a damaged log made the readers skip (metrics: skipped_records)
+    stream = read_sensor_stream(path, lidar_topic, imu_topic, gps_topic, damage=damage)
+    truth = read_ground_truth(path, damage=damage)
     first = next(stream, None)
     source = "given"
     if initial_pose is None:
@@ -236,6 +238,7 @@ def run_slam3d(
         "imu_messages": counts["imu"],
         "gps_messages": counts["gps"],
         "sparse_sweeps_skipped": skipped_clouds,
+        **damage.metrics(),
         "wall_time_s": wall,
         "log_duration_s": duration,
         "realtime_factor": duration / wall if wall > 0 else 0.0,

@@ -99,7 +99,12 @@ the operating system whenever the log time or the wall clock has advanced by ``f
 process therefore loses at most the last second (the OS is not asked to fsync: a power cut
 may lose more). A file that was never finished (no footer) is
 still read: :func:`read_mission_log` streams the records and stops at the first incomplete one;
-:func:`log_summary` says whether the footer is there.
+:func:`log_summary` says whether the footer is there. Damage is skipped, not raised: a record
+or message that does not parse or decode, a corrupt record length (the reader finds the records
+again after it) and an incomplete last record are counted in a
+:class:`~usvdrake.logs.damage.ReadDamage` (``damage=`` of the readers; ``skipped_records`` of
+:func:`log_summary`, of ``usvdrake slam2d`` / ``slam3d``'s metrics); see
+:mod:`~usvdrake.logs.mission_log.records`.
 
 API: :class:`MissionLogWriter` (``write_state``, ``write_vector``, ``write_pose``,
 ``write_scan``, ``write_gps``, ``write_imu``, ``write_cloud``, ``write_transform``,
@@ -116,7 +121,8 @@ needed to read a log back).
 
 The package's modules, lowest first (each imports only those before it): ``schema`` (encoding
 and schema names, JSON Schemas, Foxglove's official ones), ``codecs`` (message encoders and
-decoders, the range-image cloud codec), ``writer`` (:class:`MissionLogWriter`), ``reader``
+decoders, the range-image cloud codec), ``writer`` (:class:`MissionLogWriter`), ``records``
+(the MCAP records of a file, damage skipped and counted), ``reader``
 (:func:`read_mission_log`, :func:`log_summary`, ``read_log_*``), ``recorder``
 (:class:`MissionRecorder`, :func:`add_mission_recorder`). This module re-exports the names used
 elsewhere.

@@ -3,15 +3,23 @@ record per message) that registers each topic's channel and schema on first use,
 states, vectors, poses, scans, GPS fixes, IMU samples and point clouds with the codecs, and
 flushes to the operating system every ``flush_period`` of log or wall time (a background thread
 covers quiet periods) so a crashed run loses at most the last second; and
-:func:`vector_names`, the default field names of a vector."""
+:func:`vector_names`, the default field names of a vector.
+
+A killed writer leaves a valid MCAP file: :class:`_TailKeepingFile` ends the file, after every
+flush, with a provisional DataEnd + Footer (no summary) + magic, and writes the next records
+over that tail in one ``pwrite``. So the ``mcap`` package's own reader (which seeks to the footer
+first) and Foxglove read a crashed run's log up to its last flush."""
 
 import math
+import os
 import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from mcap.writer import Writer
+from mcap.data_stream import RecordBuilder
+from mcap.records import DataEnd, Footer
+from mcap.writer import MCAP0_MAGIC, Writer
 
 from usvdrake.logs.mission_log.codecs import (
     _json,
@@ -45,6 +53,59 @@ from usvdrake.sensors.messages import GpsFix, ImuSample, LaserScan, PointCloud
 
 
 # --- writing ----------------------------------------------------------------------------------
+def _provisional_tail() -> bytes:
+    """DataEnd (no CRC) + a Footer without a summary + the closing magic: what makes a file cut
+    after it a complete, unindexed MCAP file (readers then read it linearly)."""
+    b = RecordBuilder()
+    DataEnd(data_section_crc=0).write(b)
+    Footer(summary_start=0, summary_offset_start=0, summary_crc=0).write(b)
+    return b.end() + MCAP0_MAGIC
+
+
+_TAIL = _provisional_tail()
+
+
+class _TailKeepingFile:
+    """The output stream of the mcap ``Writer``: bytes wait in memory until :meth:`flush`, which
+    writes them and a provisional tail at the end of the records already on disk, in one
+    ``pwrite`` (a process killed in a system call finishes it, so the file never ends mid-record;
+    the next flush overwrites the tail). :meth:`close` writes the real tail and truncates."""
+
+    def __init__(self, path: Path):
+        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        self._committed = 0  # bytes of records on disk, before the provisional tail
+        self._pending = bytearray()
+
+    def write(self, data) -> int:
+        self._pending += data
+        return len(data)
+
+    def tell(self) -> int:
+        return self._committed + len(self._pending)
+
+    def flush(self) -> None:
+        if self._pending:
+            data = bytes(self._pending) + _TAIL
+            if os.pwrite(self._fd, data, self._committed) != len(data):
+                raise OSError(f"short write to the mission log ({len(data)} bytes)")
+            self._committed += len(self._pending)
+            self._pending.clear()
+
+    def close(self) -> None:
+        """Write what is pending as the file's real end (``Writer.finish()`` wrote the summary,
+        footer and magic) and cut the provisional tail that was after it."""
+        if self._fd < 0:
+            return
+        if self._pending:
+            data = bytes(self._pending)
+            os.pwrite(self._fd, data, self._committed)
+            self._committed += len(data)
+            self._pending.clear()
+        os.ftruncate(self._fd, self._committed)
+        os.close(self._fd)
+        self._fd = -1
+
+
 class MissionLogWriter:
     """An MCAP mission log being written: channels are registered on first use, each message is
     one record, and the file is flushed to the OS every ``flush_period`` of log or wall time (a
@@ -54,7 +115,7 @@ class MissionLogWriter:
     def __init__(self, path: str | Path, flush_period: float = 0.5, profile: str = "usvdrake"):
         self.path = Path(path)
         self.flush_period = float(flush_period)
-        self._file = open(self.path, "wb")  # noqa: SIM115 - closed by close()
+        self._file = _TailKeepingFile(self.path)
         self._writer = Writer(self._file, use_chunking=False)
         self._writer.start(profile=profile, library="usvdrake")
         self._lock = threading.Lock()
