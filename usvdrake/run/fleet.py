@@ -13,6 +13,7 @@ from pydrake.systems.primitives import LogVectorOutput
 
 from usvdrake.analysis.metrics import vessel_clearance
 from usvdrake.diagrams.fleet_diagram import build_fleet_diagram
+from usvdrake.run.measure import interruption
 from usvdrake.run.simulate import MissionResult, make_meshcat, simulate
 from usvdrake.scenario import Scenario
 from usvdrake.systems.guidance.taxi_pilot import PHASES
@@ -114,11 +115,9 @@ def run_fleet_mission(
         "sim_time_s": float(t),
         "wall_time_s": float(wall),
         "realtime_factor": outcome.realtime_factor,
-        "interrupted": outcome.interrupted is not None,  # SIGINT / SIGTERM stopped it early
+        **interruption(outcome.interrupted),  # SIGINT / SIGTERM stopped it early
         "all_served": bool(complete),
     }
-    if outcome.interrupted is not None:
-        metrics["interrupted_by"] = outcome.interrupted
     metrics.update(ledger.metrics())
     pairs = separations(tracks, vessel)
     closest = min(pairs, key=lambda k: float(np.min(pairs[k])))

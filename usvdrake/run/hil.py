@@ -48,7 +48,7 @@ from usvdrake.diagrams.hardware_station import (
 from usvdrake.diagrams.vessel_diagram import build_vessel_diagram
 from usvdrake.jsonable import jsonable
 from usvdrake.logs.mission_log import MissionLogWriter, RecordedPort, add_mission_recorder
-from usvdrake.run.measure import final_values
+from usvdrake.run.measure import final_values, interruption
 from usvdrake.run.mission import run_mission
 from usvdrake.run.simulate import simulate
 from usvdrake.scenario import Scenario, scenario_yaml
@@ -389,7 +389,7 @@ def run_hil(
         "tracked_until_s": float(tracked_until),
         "wall_time_s": float(wall),
         "realtime_lag_s": float(lag_s),
-        "interrupted": outcome.interrupted is not None,  # SIGINT / SIGTERM ended it early
+        **interruption(outcome.interrupted),  # SIGINT / SIGTERM ended it early
         "byte_corruption": corruption if rig is not None else None,
     }
     if rig_events:

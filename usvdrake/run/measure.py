@@ -214,4 +214,13 @@ def metrics_from_log(path: str | Path) -> dict:
     missing = [p for p in REQUIRED if p not in signals]
     if missing:
         raise ValueError(f"{path}: the log has no {', '.join(SIGNALS[p] for p in missing)}")
-    return measure_mission(scenario, vessel, world, signals, finals, finals.get("done", False))
+    metrics = measure_mission(scenario, vessel, world, signals, finals, finals.get("done", False))
+    metrics.update(interruption(finals.get("interrupted")))
+    return metrics
+
+
+def interruption(signal_name: str | None) -> dict:
+    """The metrics that say whether SIGINT / SIGTERM stopped the run early (and which)."""
+    if signal_name is None:
+        return {"interrupted": False}
+    return {"interrupted": True, "interrupted_by": signal_name}

@@ -16,6 +16,7 @@ from usvdrake.run.measure import (
     SIGNALS,
     Signal,
     final_values,
+    interruption,
     measure_mission,
     recorded_signal_ports,
 )
@@ -119,9 +120,7 @@ def run_mission(
             metrics["wall_time_s"] = float(wall)
             metrics["realtime_factor"] = outcome.realtime_factor
             # SIGINT / SIGTERM stopped the run early: every output is still written
-            metrics["interrupted"] = outcome.interrupted is not None
-            if outcome.interrupted is not None:
-                metrics["interrupted_by"] = outcome.interrupted
+            metrics.update(interruption(outcome.interrupted))
     times, states = signals["ground_truth_state"].times, signals["ground_truth_state"].values
     reference = signals["reference"].values
     thrust = signals["thrust_applied"].values
