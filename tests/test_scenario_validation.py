@@ -136,6 +136,34 @@ BAD = [
     ),
     (add("slam: {hector: {resolution: 1e-9}}\n"), "slam.hector.resolution", "[0.01, 10]"),
     (add("hardware: {poll_period: 1e-9}\n"), "hardware.poll_period", "[0.0001, 10]"),
+    # sizes nothing physical has: coordinates and directions of 1e300 overflow downstream
+    (wp("[[1.0e300, 0.0]]"), "mission.waypoints[0][0]", "[-1e+06, 1e+06]"),
+    (add("initial_state: [0, -2.0e6, 0, 0, 0, 0]\n"), "initial_state[1]", "[-1e+06, 1e+06]"),
+    (add("initial_state: [0, 0, 1.0e300, 0, 0, 0]\n"), "initial_state[2]", "[-1000, 1000]"),
+    (
+        add("environment: {wind: {direction_deg: 1.0e300}}\n"),
+        "environment.wind.direction_deg",
+        "[-3600, 3600]",
+    ),
+    (
+        add("sensors: {lidar3d: {mount: [1.0e300, 0, 1, 0]}}\n"),
+        "sensors.lidar3d.mount[0]",
+        "[-1000, 1000]",
+    ),
+    (add("slam: {hector: {map_origin: [0, -1.0e300]}}\n"), "slam.hector.map_origin[1]", "[-1e+06"),
+    (
+        add("slam: {hector: {map_size: [9000, 9000]}}\n"),
+        "slam.hector.map_size",
+        "at most 1e+08 cells",
+    ),
+    (
+        add("fleet: {requests: [{time: 0, pickup: [1.0e300, 0], destination: [0, 0]}]}\n"),
+        "fleet.requests[0].pickup[0]",
+        "[-1e+06, 1e+06]",
+    ),
+    (add("sensors: {gps: {horizontal_std: -1}}\n"), "sensors.gps.horizontal_std", "[0, 1e+06]"),
+    (add("sensors: {lidar2d: {dropout: 2}}\n"), "sensors.lidar2d.dropout", "[0, 1]"),
+    (add("nmpc: {nlp_tolerance: 1.0e300}\n"), "nmpc.nlp_tolerance", "[-1e+09, 1e+09]"),
     # duplicate keys
     (add("seed: 1\nseed: 2\n"), "seed", "each key once"),
     (add("environment: {wind: {mean_speed: 1, mean_speed: 2}}\n"), "mean_speed", "each key once"),
@@ -191,6 +219,19 @@ def test_cli_subprocess_duration_inf(tmp_path):
     )
     assert r.returncode == 2 and r.stderr.count("\n") == 1
     assert "'duration'" in r.stderr and FINITE in r.stderr
+
+
+def test_a_huge_file_is_refused_before_it_is_parsed(tmp_path):
+    path = write(tmp_path, GOOD + "".join(f"k{i}: {i}\n" for i in range(200_000)))
+    with pytest.raises(ConfigError, match="at most 1 MB of YAML"):
+        load_scenario(path)
+
+
+def test_a_bad_command_line_is_one_line(capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["run", "canal_demo", "--duration", "abc"])
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and err.count("\n") == 1 and "invalid float value" in err
 
 
 def test_cli_out_is_a_file(tmp_path, capsys):

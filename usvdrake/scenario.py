@@ -241,6 +241,7 @@ class Scenario:
 # ending so (an exact key wins). Every number must first be finite. The caps keep a run from
 # stalling the integrator or needing more than a few GB.
 DAY = 86400.0
+WORLD = 1.0e6  # [m] how far from the world's origin a position may be
 RANGES: dict[str, tuple] = {
     "duration": (0.0, DAY, "(]"),
     "seed": (0, 2**32 - 1),
@@ -300,7 +301,38 @@ RANGES: dict[str, tuple] = {
     "hardware.stale_timeout": (0.0, 3600.0, "(]"),
     "hardware.sensor_timeout": (0.0, 3600.0, "(]"),
     "hardware.poll_period": (1e-4, 10.0),
+    # where things are: within 1000 km of the world's origin (coordinates of 1e300 overflow)
+    "initial_state[0]": (-WORLD, WORLD),
+    "initial_state[1]": (-WORLD, WORLD),
+    "initial_state[2]": (-1000.0, 1000.0),  # [rad] any heading, not an absurd number of turns
+    "fleet.vessels[*].initial_state[0]": (-WORLD, WORLD),
+    "fleet.vessels[*].initial_state[1]": (-WORLD, WORLD),
+    "fleet.vessels[*].initial_state[2]": (-1000.0, 1000.0),
+    "fleet.vessels[*].fail_at": (-DAY, DAY),
+    "mission.waypoints[*]": (-WORLD, WORLD),
+    "fleet.requests[*].pickup": (-WORLD, WORLD),
+    "fleet.requests[*].destination": (-WORLD, WORLD),
+    "fleet.requests[*].time": (0.0, DAY),
+    "slam.hector.map_origin": (-WORLD, WORLD),
+    "slam.graph.map_origin": (-WORLD, WORLD),
+    "slam.hector.map_size": (0.0, 1e4, "(]"),  # [m]; and a bounded number of cells, below
+    "slam.graph.map_size": (0.0, 1e4, "(]"),
+    "*direction_deg": (-3600.0, 3600.0),
+    "*azimuth_deg": (-3600.0, 3600.0),
+    "*width_deg": (0.0, 360.0),
+    "*mount": (-1000.0, 1000.0),  # [m, m, m, rad] a sensor on the hull
+    "*lever_arm": (-1000.0, 1000.0),
+    "*range_max": (0.0, 1e4),  # 0: the preset's
+    "*max_range": (0.0, 1e4),
+    "*_std": (0.0, 1e6),
+    "*_sigma": (0.0, 1e6),
+    "*fraction": (0.0, 1.0),
+    "*dropout": (0.0, 1.0),
+    "*inflation": (0.0, 1e3),
+    "*baudrate": (1, 1e8),
 }
+DEFAULT_RANGE = (-1e9, 1e9)  # any other number: finite and of a size nothing here overflows on
+MAX_MAP_CELLS = 1e8  # a 2D map of float64 cells: 800 MB
 NMPC_MAX_STEPS = 200  # nmpc.horizon / nmpc.dt: the QP grows with the intervals
 
 
@@ -357,9 +389,20 @@ def check_numbers(s: Scenario, file: str | Path = "scenario") -> None:
         if isinstance(value, (float, np.floating)) and not math.isfinite(value):
             raise ConfigError(file, key, "a finite number", repr(float(value)))
     for key, value in leaves:
-        rule = range_of(key)
-        if rule is not None and not in_range(value, rule):
+        rule = range_of(key) or DEFAULT_RANGE
+        if not in_range(value, rule):
             raise ConfigError(file, key, describe_range(rule), repr(value))
+    maps = (("hector", s.slam.hector.resolution), ("graph", s.slam.graph.map_resolution))
+    for name, resolution in maps:
+        size = getattr(s.slam, name).map_size
+        cells = size[0] * size[1] / resolution**2
+        if cells > MAX_MAP_CELLS:
+            raise ConfigError(
+                file,
+                f"slam.{name}.map_size",
+                f"at most {MAX_MAP_CELLS:.0e} cells of {resolution:g} m",
+                f"{size} ({cells:.2g} cells)",
+            )
     steps = s.nmpc.horizon / s.nmpc.dt
     if steps > NMPC_MAX_STEPS:
         raise ConfigError(

@@ -87,8 +87,17 @@ _StrictLoader.add_multi_constructor(
 )
 
 
+MAX_YAML_BYTES = 1 << 20  # a configuration file is a page or two; PyYAML takes ~10 s per 10 MB
+
+
 def _load_raw(path: Path) -> Any:
     """The YAML tree of ``path`` (root keys starting with ``_`` dropped, as Drake does)."""
+    try:
+        size = Path(path).stat().st_size
+    except OSError as e:
+        raise ConfigError(path, "", "a readable file", e.strerror or type(e).__name__) from None
+    if size > MAX_YAML_BYTES:
+        raise ConfigError(path, "", f"at most {MAX_YAML_BYTES >> 20} MB of YAML", f"{size} bytes")
     try:
         with open(path, encoding="utf-8") as f:
             raw = yaml.load(f, Loader=_StrictLoader)  # noqa: S506 (a SafeLoader subclass)

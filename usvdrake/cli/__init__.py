@@ -49,12 +49,18 @@ def _command_module(command: str):
     return importlib.import_module(f"{__name__}.{_MODULES[command]}")
 
 
+class _OneLineParser(argparse.ArgumentParser):
+    """A bad argument is one line on stderr and exit 2, like every other refusal (argparse
+    prints the whole usage first)."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def make_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The ``usvdrake`` parser: every command with its help only, and ``command``'s (if given)
     full arguments, added by its module's ``add_arguments`` (which imports that module)."""
-    p = argparse.ArgumentParser(
-        prog="usvdrake", description="Autonomous surface vessels as Drake diagrams."
-    )
+    p = _OneLineParser(prog="usvdrake", description="Autonomous surface vessels as Drake diagrams.")
     sub = p.add_subparsers(dest="command", required=True)
     for name, _, help_text in COMMANDS:
         parser = sub.add_parser(name, help=help_text)
