@@ -87,6 +87,33 @@ def test_every_foxglove_message_is_valid_against_the_official_schema(mission):
     assert wanted <= checked
 
 
+def test_every_other_json_channel_is_valid_against_the_schema_it_declares(mission):
+    """Our own channels (usvdrake.*) carry a JSON Schema that Foxglove reads to show their
+    fields (Raw Messages, Plot panels): every message must match it. The one binary channel,
+    the range image, has a foxglove.PointCloud twin for display."""
+    _, _, log = mission
+    validators, binary, topics, checked = {}, set(), set(), 0
+    with open(log, "rb") as f:
+        for schema, channel, message in make_reader(f).iter_messages():
+            topics.add(channel.topic)
+            if schema.name.startswith("foxglove."):
+                continue
+            assert schema.encoding == "jsonschema", channel.topic
+            if channel.message_encoding != "json":
+                binary.add(channel.topic)
+                continue
+            if schema.id not in validators:
+                declared = json.loads(schema.data)
+                cls = jsonschema.validators.validator_for(declared)
+                cls.check_schema(declared)
+                validators[schema.id] = cls(declared)
+            validators[schema.id].validate(json.loads(message.data))
+            checked += 1
+    assert checked > 100
+    for topic in binary:
+        assert f"{topic}_foxglove" in topics, f"{topic} has no channel Foxglove can draw"
+
+
 def test_the_transform_tree_connects_the_lidar_to_the_world(mission):
     name, scenario, log = mission
     channels = _channels(log)

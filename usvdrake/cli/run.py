@@ -1,5 +1,8 @@
 """``usvdrake run``: simulate a scenario and write metrics, replay and report."""
 
+import cProfile
+import io
+import pstats
 import sys
 import time
 from pathlib import Path
@@ -111,6 +114,27 @@ def add_arguments(r) -> None:
         "--no-replay", action="store_true", help="skip the Meshcat recording (replay.html)"
     )
     r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.add_argument(
+        "--profile",
+        action="store_true",
+        help="profile the run: OUT/profile.prof (open with snakeviz) and the top functions",
+    )
+
+
+def _profiled(out: Path, call):
+    """``call()`` under cProfile: the profile goes to OUT/profile.prof (snakeviz, or
+    ``python -m pstats``) and the 15 functions with the most own time to stderr."""
+    profiler = cProfile.Profile()
+    try:
+        return profiler.runcall(call)
+    finally:
+        out.mkdir(parents=True, exist_ok=True)
+        profiler.dump_stats(out / "profile.prof")
+        text = io.StringIO()
+        pstats.Stats(profiler, stream=text).sort_stats("tottime").print_stats(15)
+        body = text.getvalue()
+        print(body[body.find("   ncalls") :].rstrip(), file=sys.stderr)
+        print(f"profile: {out / 'profile.prof'} (snakeviz {out / 'profile.prof'})", file=sys.stderr)
 
 
 def run(args) -> int:
@@ -124,14 +148,18 @@ def run(args) -> int:
             f"Meshcat (localhost only): {meshcat.web_url()}  — open it in a browser to watch live"
         )
     rate = args.realtime_rate if args.realtime_rate is not None else (1.0 if args.meshcat else 0.0)
-    result = run_mission(
-        scenario,
-        out_dir=args.out,
-        meshcat=meshcat,
-        record=not args.no_replay,
-        progress=not args.quiet,
-        realtime_rate=rate,
-    )
+
+    def mission():
+        return run_mission(
+            scenario,
+            out_dir=args.out,
+            meshcat=meshcat,
+            record=not args.no_replay,
+            progress=not args.quiet,
+            realtime_rate=rate,
+        )
+
+    result = _profiled(Path(args.out), mission) if args.profile else mission()
     if scenario.controller == "taxi":
         print(fleet_summary(result.metrics, args.out))
     else:
