@@ -1,0 +1,135 @@
+"""Scenario-Based MPC (Johansen et al. 2016): COLREG-typical choices on hand-made encounters.
+
+Angles counter-clockwise from east: a starboard (right) turn is a NEGATIVE course offset."""
+
+import numpy as np
+import pytest
+
+from usvdrake.systems.colav.sbmpc import (
+    NMI,
+    Sbmpc,
+    SbmpcParams,
+    behaviours,
+    hazard,
+    predict_own,
+)
+from usvdrake.systems.colav.tracking import Track
+
+KNOT = NMI / 3600.0
+NORTH = np.pi / 2
+U = 10.0 * KNOT
+
+
+def _decide(target_pos, target_vel, params=None, speed=U):
+    s = Sbmpc(params or SbmpcParams())
+    return s.decide([0.0, 0.0], NORTH, speed, NORTH, speed, positions=target_pos,
+                    velocities=target_vel)  # fmt: skip
+
+
+def test_no_targets_keeps_course_and_speed():
+    d = _decide([], [])
+    assert (d.course_offset, d.speed_factor, d.active) == (0.0, 1.0, False)
+    far = _decide([[0.0, 20.0 * NMI]], [[0.0, -5.0]])  # beyond d_init
+    assert (far.course_offset, far.speed_factor) == (0.0, 1.0)
+
+
+@pytest.mark.parametrize("range_nmi", [4.0, 6.0])
+def test_head_on_turns_to_starboard(range_nmi):
+    d = _decide([[30.0, range_nmi * NMI]], [[0.0, -12.0 * KNOT]])
+    assert d.active
+    assert d.course_offset < 0.0  # starboard: ψ decreasing
+    assert d.speed_factor == 1.0
+    assert d.min_distance >= SbmpcParams().d_safe
+    # the port alternative of the same size is judged worse
+    chi, fac = behaviours(SbmpcParams())
+    mirror = np.flatnonzero(np.isclose(chi, -d.course_offset) & (fac == 1.0))[0]
+    assert d.costs[mirror] > d.cost
+
+
+@pytest.mark.parametrize("minutes", [10.0, 15.0])
+def test_give_way_crossing_turns_starboard_and_passes_astern(minutes):
+    tc = 60.0 * minutes  # both reach (0, U tc) at tc on the present courses
+    vt = np.array([-12.0 * KNOT, 0.0])  # from starboard (east), heading west
+    pt = np.array([12.0 * KNOT * tc, U * tc])
+    d = _decide([pt], [vt])
+    assert d.course_offset < 0.0 or d.speed_factor < 1.0
+    assert d.course_offset <= 0.0
+    assert d.min_distance >= SbmpcParams().d_safe
+    # never ahead of the target's bow: where the own ship crosses the target's course line
+    # (y = U tc), the target has already passed (is west of us): the own ship passes astern.
+    p = SbmpcParams()
+    pos, vel, _, t = predict_own(p, [0.0, 0.0], NORTH, U, NORTH, U)
+    path, v_end = pos[d.index], vel[d.index, -1]
+    if path[-1, 1] >= pt[1]:
+        k = np.flatnonzero(path[:, 1] >= pt[1])[0]
+        t_cross, x_cross = t[k], path[k, 0]
+    else:  # beyond the horizon: the prediction holds its final velocity
+        t_cross = t[-1] + (pt[1] - path[-1, 1]) / v_end[1]
+        x_cross = path[-1, 0] + v_end[0] * (t_cross - t[-1])
+    target_x = pt[0] + vt[0] * t_cross
+    assert target_x < x_cross - p.d_safe  # target at least d_safe past the crossing point
+
+
+def test_stand_on_keeps_course_while_far():
+    tc = 25.0 * 60.0  # target from port (west) heading east, collision in 25 min
+    vt = np.array([12.0 * KNOT, 0.0])
+    d = _decide([[-12.0 * KNOT * tc, U * tc]], [vt])
+    assert (d.course_offset, d.speed_factor) == (0.0, 1.0)
+    assert d.active
+
+
+def test_stand_on_acts_when_close_and_not_to_port():
+    tc = 7.0 * 60.0  # give-way vessel has not acted; 7 min to collision
+    vt = np.array([12.0 * KNOT, 0.0])
+    d = _decide([[-12.0 * KNOT * tc, U * tc]], [vt])
+    assert (d.course_offset, d.speed_factor) != (0.0, 1.0)
+    assert d.course_offset <= 0.0  # Rule 17(c): no port turn for a vessel on our port side
+
+
+def test_accepts_tracks_and_remembers_last_choice():
+    s = Sbmpc()
+    tr = Track(5, 0.0, np.array([0.0, 5.0 * NMI]), np.array([0.0, -6.0]), np.eye(4), 0.0, 3)
+    d1 = s.decide([0.0, 0.0], NORTH, U, NORTH, U, [tr])
+    assert s.last == (d1.course_offset, d1.speed_factor)
+    # the change cost g makes keeping the previous choice cheaper than before
+    p = SbmpcParams()
+    first, _ = hazard(p, [0, 0], NORTH, U, NORTH, U, [[0, 5 * NMI]], [[0, -6]], (0.0, 1.0))
+    again, _ = hazard(p, [0, 0], NORTH, U, NORTH, U, [[0, 5 * NMI]], [[0, -6]], s.last)
+    assert again[d1.index] <= first[d1.index]
+
+
+def test_scale_free_parameters_for_a_canal_boat():
+    p = SbmpcParams.for_safety_distance(
+        5.0, horizon_s=60.0, dt_s=0.5, course_time_constant_s=2.0, speed_time_constant_s=3.0
+    )
+    assert p.d_close == pytest.approx(5.0 * 3.0)
+    s = Sbmpc(p)
+    d = s.decide([0.0, 0.0], NORTH, 1.0, NORTH, 1.0, positions=[[0.0, 40.0]],
+                 velocities=[[0.0, -1.0]])  # fmt: skip
+    assert d.course_offset < 0.0
+    assert d.min_distance >= 5.0
+
+
+def test_prediction_follows_offset_course_and_speed():
+    p = SbmpcParams()
+    pos, vel, chi, t = predict_own(p, [100.0, 200.0], NORTH, U, NORTH, U)
+    c, f = behaviours(p)
+    k = np.flatnonzero(np.isclose(c, np.radians(-30.0)) & (f == 0.5))[0]
+    assert chi[k, -1] == pytest.approx(NORTH - np.radians(30.0), abs=1e-6)
+    assert np.hypot(*vel[k, -1]) == pytest.approx(0.5 * U, rel=1e-3)
+    assert pos[k, 0] == pytest.approx([100.0, 200.0])
+
+
+def test_roles_are_remembered_per_track_and_passed_targets_forgotten():
+    s = Sbmpc()
+    tr = Track(9, 0.0, np.array([0.0, 5.0 * NMI]), np.array([0.0, -6.0]), np.eye(4), 0.0, 3)
+    s.decide([0.0, 0.0], NORTH, U, NORTH, U, [tr])
+    assert s.roles[9][0]  # head-on
+    # after our own 40° starboard turn the fresh geometry is no longer head-on; the role stays
+    s.decide([0.0, 0.0], NORTH - np.radians(40.0), U, NORTH, U, [tr])
+    assert s.roles[9][0]
+    # the target has passed (opening) and is farther than d_close: ignored and forgotten
+    gone = Track(9, 0.0, np.array([0.0, -2.0 * NMI]), np.array([0.0, -6.0]), np.eye(4), 0.0, 3)
+    d = s.decide([0.0, 0.0], NORTH, U, NORTH, U, [gone])
+    assert (d.course_offset, d.speed_factor, d.active) == (0.0, 1.0, False)
+    assert 9 not in s.roles
