@@ -250,19 +250,28 @@ def encode_packet(packet: Vlp16Packet) -> bytes:
 def _firing_azimuths_cdeg(packet: Vlp16Packet) -> np.ndarray:
     """(12, 2) azimuth [0.01°, float, in [0, 36000)] of both firings of every block."""
     dual = packet.return_mode == RETURN_DUAL
-    az = np.asarray(packet.azimuth_cdeg, np.int64)
+    az = np.asarray(packet.azimuth_cdeg, np.float64)  # whole hundredths: exact in float
     distinct = az[0::2] if dual else az  # one azimuth per pair of firings
-    gap = np.mod(np.diff(distinct), AZIMUTH_UNITS).astype(float)
-    gap = np.append(gap, gap[-1])  # the last block: the previous gap
+    gap = np.empty_like(distinct)
+    np.mod(distinct[1:] - distinct[:-1], AZIMUTH_UNITS, out=gap[:-1])
+    gap[-1] = gap[-2]  # the last block: the previous gap
     second = np.mod(distinct + 0.5 * gap, AZIMUTH_UNITS)
-    if dual:
-        second = np.repeat(second, 2)
-    return np.column_stack([az.astype(float), second])
+    out = np.empty((az.size, 2))
+    out[:, 0] = az
+    out[:, 1] = np.repeat(second, 2) if dual else second
+    return out
 
 
 def _block_times_us(packet: Vlp16Packet) -> np.ndarray:
     seq = np.arange(BLOCKS) // 2 if packet.return_mode == RETURN_DUAL else np.arange(BLOCKS)
     return seq * BLOCK_US
+
+
+# per return mode, the blocks a sweep uses and their firings' times in the packet [µs] (nb, 2)
+_ALL_BLOCKS = np.arange(BLOCKS)
+_DUAL_BLOCKS = _ALL_BLOCKS[0::2]
+_FIRING_US = (_ALL_BLOCKS * BLOCK_US)[:, None] + np.array([0.0, SEQUENCE_US])
+_DUAL_FIRING_US = ((_ALL_BLOCKS // 2) * BLOCK_US)[_DUAL_BLOCKS, None] + np.array([0.0, SEQUENCE_US])
 
 
 def decode_firings(packet: Vlp16Packet | bytes) -> list[Firing]:
@@ -447,23 +456,26 @@ class SweepAssembler:
         self._last_ts = ts
         base_us = self._hours * float(US_PER_HOUR) + ts
 
-        use = np.arange(BLOCKS)
-        if packet.return_mode == RETURN_DUAL:
-            use = use[0::2]
+        dual = packet.return_mode == RETURN_DUAL
+        use = _DUAL_BLOCKS if dual else _ALL_BLOCKS
         fa = _firing_azimuths_cdeg(packet)[use] / 100.0  # (nb, 2)
-        ft = base_us + _block_times_us(packet)[use, None] + np.array([0.0, SEQUENCE_US])
+        ft = base_us + (_DUAL_FIRING_US if dual else _FIRING_US)
         rel = np.mod(fa - self.cut_azimuth_deg, 360.0).ravel()  # firing order
+        # the firings where the azimuth wrapped past the cut (found at once, not per firing)
+        before = np.empty_like(rel)
+        before[1:] = rel[:-1]
+        before[0] = -np.inf if self._prev_rel is None else self._prev_rel
+        wraps = (rel < before - 1.0).nonzero()[0]
+        self._prev_rel = float(rel[-1])
         out: list[PointCloud] = []
         start = 0
-        for i, a in enumerate(rel):
-            if self._prev_rel is not None and a < self._prev_rel - 1.0:  # wrapped
-                self._add(packet, use, fa, ft, start, i)
-                start = i
-                cloud = self._finish()
-                if cloud is not None:
-                    out.append(cloud)
-                self._complete = True
-            self._prev_rel = a
+        for i in wraps:
+            self._add(packet, use, fa, ft, start, int(i))
+            start = int(i)
+            cloud = self._finish()
+            if cloud is not None:
+                out.append(cloud)
+            self._complete = True
         self._add(packet, use, fa, ft, start, len(rel))
         return out
 
@@ -471,14 +483,22 @@ class SweepAssembler:
         if hi <= lo:
             return
         self._sweep_packets += 1
+        # kept as they came: the points are made in _finish, so a sweep that is dropped
+        # (a stalled azimuth never wraps) costs no more than this
+        self._parts.append((packet.distance, use, fa, ft, lo, hi))
+
+    @staticmethod
+    def _points(distance, use, fa, ft, lo: int, hi: int):
+        """(ranges [m], laser ids, azimuths [deg], times [µs], firing times [µs]) of firings
+        lo..hi of one packet's blocks ``use``."""
         idx = np.arange(lo, hi)
         blk, f = use[idx // 2], idx % 2
-        d = np.asarray(packet.distance)[blk[:, None], f[:, None] * LASERS + np.arange(LASERS)]
+        d = np.asarray(distance)[blk[:, None], f[:, None] * LASERS + np.arange(LASERS)]
         t = ft.ravel()[idx][:, None] + np.arange(LASERS) * FIRING_US
         a = np.broadcast_to(fa.ravel()[idx][:, None], d.shape)
         m = d > 0
         lid = np.broadcast_to(np.arange(LASERS), d.shape)[m]
-        self._parts.append((d[m] * DISTANCE_UNIT_M, lid, a[m], t[m], ft.ravel()[idx]))
+        return d[m] * DISTANCE_UNIT_M, lid, a[m], t[m], ft.ravel()[idx]
 
     def flush(self) -> PointCloud | None:
         """The sweep in progress (complete or not) as a cloud, and start afresh."""
@@ -495,7 +515,8 @@ class SweepAssembler:
         if not (self._complete or force):
             self.partial_sweeps += 1
             return None
-        r, lid, a, t, ftimes = (np.concatenate(p) for p in zip(*parts, strict=True))
+        points = [self._points(*part) for part in parts]
+        r, lid, a, t, ftimes = (np.concatenate(p) for p in zip(*points, strict=True))
         t0, t1 = float(ftimes.min()), float(ftimes.max() + (LASERS - 1) * FIRING_US)
         ring = LASER_RING[lid]
         col = np.rint(np.mod(a - self.cut_azimuth_deg, 360.0) / self.resolution_deg).astype(int)
