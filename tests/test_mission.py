@@ -57,7 +57,7 @@ def test_cli_run_writes_outputs(tmp_path, capsys):
 
 
 @pytest.mark.slow
-def test_basin_exploration_meets_003(tmp_path):
+def test_basin_exploration_meets_ueland_2017(tmp_path):
     """The exploration issue's numbers, end to end: Hector SLAM, frontiers, A*, velocity law,
     observer + PD + reference model + allocation, from no map to finished (~20 s wall)."""
     m = run_mission(load_scenario("basin_explore"), out_dir=tmp_path, record=False).metrics
