@@ -2,7 +2,6 @@
 shores, the basin's connectivity for the planner's inflated vessel, the sloped wave-generator face,
 valid solids, and the ray-casting budget of a Hokuyo scan in the valley."""
 
-
 import numpy as np
 import pytest
 from scipy import ndimage

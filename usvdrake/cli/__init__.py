@@ -1,5 +1,6 @@
 """The ``usvdrake`` command: ``run`` a scenario, ``campaign`` it over random days, ``bench`` a
-benchmark, ``identify`` ξ, run SLAM offline (``slam2d``, ``slam3d``, ``slam3d-ablation``).
+benchmark, ``identify`` ξ, run SLAM offline (``slam2d``, ``slam3d``, ``slam3d-ablation``), meet
+ship traffic (``encounter``, ``encounters``).
 
 One module per subcommand (``usvdrake.cli.<module>``), each with ``add_arguments(parser)`` and
 ``run(args) -> int``. This package imports only the standard library, :mod:`usvdrake.errors` and
@@ -40,6 +41,12 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
     ),
     ("analyze", "analyze", "analyses of a scenario's closed loop"),
     ("metrics", "metrics", "measure a recorded mission again from its log.mcap"),
+    ("encounter", "encounter", "one DNV traffic situation: own ship with SB-MPC COLAV on AIS"),
+    (
+        "encounters",
+        "encounters",
+        "a set of traffic situations on Dask (default: DNV's 40 standard encounters)",
+    ),
 )
 _MODULES = {name: module for name, module, _ in COMMANDS}
 

@@ -10,6 +10,14 @@ Modules (plain numpy/scipy cores unless stated):
 - ``evaluation`` — per-target and per-situation evaluation of a finished encounter (CPA,
   collision, COLREG compliance, arrival, path length) and the CSV / JSON outputs.
 
-The package data (``data/``) holds a copy of ``encounter_settings.json`` and a few situations of
-DNV's standard encounter set (see ``data/README.md``).
+Further cores: ``ship_model`` (the ship-scale own ship), ``ais`` (AIS class A reports),
+``tracking`` (a Kalman filter per AIS target), ``sbmpc`` (Scenario-Based MPC), ``route_los``
+(the own ship's LOS course), ``scaling`` (Froude scaling of a situation for a small own ship).
+Their LeafSystem shells, one per module: ``ship_plant.ShipPlant``,
+``ship_autopilot.ShipAutopilot``, ``route_guidance.RouteGuidance``, ``target_ships.TargetShips``,
+``ais_transponders.AisTransponders`` (world side), ``ais_tracker_system.AisTrackerSystem`` and
+``sbmpc_colav.SbmpcColav`` (autonomy side); ``usvdrake.diagrams.encounter_diagram`` wires them.
+
+The package data (``data/``) holds ``encounter_settings.json`` and the 40 situations of DNV's
+standard encounter set (see ``data/README.md``).
 """

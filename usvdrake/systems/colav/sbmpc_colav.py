@@ -1,0 +1,75 @@
+"""``SbmpcColav``: Scenario-Based MPC collision avoidance (Johansen et al. 2016; ``sbmpc``)
+between the route guidance and the autopilot, on tracked targets only."""
+
+import time
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import BasicVector, LeafSystem
+
+from usvdrake.angles import wrap_angle
+from usvdrake.systems.colav.sbmpc import Sbmpc, SbmpcParams
+
+# colav_diagnostics layout
+DIAGNOSTICS = ("offset", "factor", "cost", "min_predicted_distance", "active", "decide_ms",
+               "decisions")  # fmt: skip
+
+
+class SbmpcColav(LeafSystem):
+    """Re-decides (course offset, speed factor) every ``period`` seconds and commands nominal
+    course + offset at nominal speed × factor at all times (the nominal course is the route's
+    LOS course, which steers back to the route once the offset returns to 0).
+
+    .. pydrake_system::
+
+        name: SbmpcColav
+        input_ports:
+        - state
+        - nominal
+        - tracks
+        output_ports:
+        - command
+        - colav_diagnostics
+
+    ``state`` = own [x y ψ u v r]; ``nominal`` = [course [rad], speed [m/s]] from guidance;
+    ``tracks``: a list of ``tracking.Track`` (the AIS tracker's; never the targets' truth);
+    ``command`` = [course [rad], speed [m/s]]; ``colav_diagnostics`` = [offset [rad], factor,
+    cost, min_predicted_distance [m], active, decide_ms, decisions]. The ``Sbmpc`` (last choice,
+    remembered COLREG roles) is abstract state; the last decision is discrete state.
+    """
+
+    def __init__(self, params: SbmpcParams | None = None, period: float = 5.0):
+        super().__init__()
+        if not period > 0.0:
+            raise ValueError(f"SbmpcColav: period must be positive, got {period}")
+        self._state = self.DeclareVectorInputPort("state", 6)
+        self._nominal = self.DeclareVectorInputPort("nominal", 2)
+        self._tracks = self.DeclareAbstractInputPort("tracks", AbstractValue.Make([]))
+        self._sbmpc = self.DeclareAbstractState(AbstractValue.Make(Sbmpc(params)))
+        initial = np.array([0.0, 1.0, 0.0, np.inf, 0.0, 0.0, 0.0])
+        self._diag = self.DeclareDiscreteState(BasicVector(initial))
+        self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
+        deps = {self.xd_ticket(), self.input_port_ticket(self._nominal.get_index())}
+        self.DeclareVectorOutputPort("command", 2, self._calc_command, deps)
+        self.DeclareStateOutputPort("colav_diagnostics", self._diag)
+
+    def _update(self, context, state):
+        x, y, psi, u, v, _ = self._state.Eval(context)
+        course_ref, speed_ref = self._nominal.Eval(context)
+        c, s = np.cos(psi), np.sin(psi)
+        vx, vy = u * c - v * s, u * s + v * c  # velocity over ground: SB-MPC works in courses
+        sbmpc = state.get_mutable_abstract_state(self._sbmpc).get_value()
+        t0 = time.perf_counter()
+        d = sbmpc.decide(
+            [x, y], float(np.arctan2(vy, vx)), float(np.hypot(vx, vy)), float(course_ref),
+            float(speed_ref), self._tracks.Eval(context),
+        )  # fmt: skip
+        ms = 1e3 * (time.perf_counter() - t0)
+        count = context.get_discrete_state(self._diag).GetAtIndex(6) + 1.0
+        row = [d.course_offset, d.speed_factor, d.cost, d.min_distance, float(d.active), ms, count]
+        state.get_mutable_discrete_state(self._diag).SetFromVector(row)
+
+    def _calc_command(self, context, output):
+        offset, factor = context.get_discrete_state(self._diag).value()[:2]
+        course, speed = self._nominal.Eval(context)
+        output.SetFromVector([wrap_angle(course + offset), speed * factor])
