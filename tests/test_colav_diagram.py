@@ -106,6 +106,37 @@ def test_autonomy_has_no_path_to_the_targets_true_state(own):
     assert not reached & set(AUTONOMY), reached
 
 
+def test_sbmpc_colav_keeps_the_return_to_the_route_shallow_while_an_encounter_is_open():
+    path = np.pi / 2
+    colav = SbmpcColav(period=5.0, max_return=np.radians(8.0))
+    context = colav.CreateDefaultContext()
+    colav.GetInputPort("state").FixValue(context, [500.0, 0.0, path, 10 * KNOT, 0.0, 0.0])
+    # far right of the route, the LOS course pulls 40° to port of it
+    colav.GetInputPort("nominal").FixValue(context, [path + np.radians(40.0), 10 * KNOT])
+    colav.GetInputPort("path_course").FixValue(context, [path])
+    track = Track(2, 0.0, np.array([600.0, 4 * NMI]), np.array([0.0, -10 * KNOT]), np.eye(4), 0, 3)
+    colav.GetInputPort("tracks").FixValue(context, AbstractValue.Make([track]))
+    Simulator(colav, context).AdvanceTo(0.1)
+    values = colav.GetOutputPort("colav_diagnostics").Eval(context)
+    diag = dict(zip(DIAGNOSTICS, values, strict=True))
+    assert diag["encounter_open"] == 1.0
+    course, _ = colav.GetOutputPort("command").Eval(context)
+    assert np.degrees(course - path) <= 8.0 + 1e-9  # neither the pull nor the offset to port
+    # with no target the guidance's full pull comes back
+    colav.GetInputPort("tracks").FixValue(context, AbstractValue.Make([]))
+    Simulator(colav, context).AdvanceTo(5.1)
+    course, _ = colav.GetOutputPort("command").Eval(context)
+    assert course == pytest.approx(path + np.radians(40.0))
+
+
+def test_los_return_angle_can_be_capped():
+    wps = np.array([[0.0, 0.0], [0.0, 10_000.0]])
+    free = los_course(wps, 0, [2000.0, 1000.0], 1000.0)
+    capped = los_course(wps, 0, [2000.0, 1000.0], 1000.0, np.radians(8.0))
+    assert np.degrees(free - np.pi / 2) == pytest.approx(np.degrees(np.arctan(2.0)))
+    assert np.degrees(capped - np.pi / 2) == pytest.approx(8.0)
+
+
 def test_sbmpc_colav_turns_to_starboard_for_a_head_on_track():
     colav = SbmpcColav(period=5.0)
     context = colav.CreateDefaultContext()

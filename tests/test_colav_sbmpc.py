@@ -12,6 +12,7 @@ from usvdrake.systems.colav.sbmpc import (
     behaviours,
     hazard,
     predict_own,
+    stand_on_released,
 )
 from usvdrake.systems.colav.tracking import Track
 
@@ -133,3 +134,34 @@ def test_roles_are_remembered_per_track_and_passed_targets_forgotten():
     d = s.decide([0.0, 0.0], NORTH, U, NORTH, U, [gone])
     assert (d.course_offset, d.speed_factor, d.active) == (0.0, 1.0, False)
     assert 9 not in s.roles
+
+
+def test_stand_on_release_needs_a_close_cpa_and_is_latched():
+    p = SbmpcParams()
+    tc = 7.0 * 60.0  # within the release time (0.6 × 900 s) ...
+    vt = np.array([12.0 * KNOT, 0.0])
+    collision = np.array([[-12.0 * KNOT * tc, U * tc]])
+    v0 = np.array([0.0, U])
+    assert stand_on_released(p, [0.0, 0.0], v0, collision, [vt])[0]
+    # ... but a target that will pass 1.5 nmi ahead has not left us to act (Rule 17(a))
+    passing = collision + [[0.0, 1.5 * NMI]]
+    assert not stand_on_released(p, [0.0, 0.0], v0, passing, [vt])[0]
+    # once released for a track, it stays released while the track is relevant
+    s = Sbmpc()
+    far = Track(7, 0.0, collision[0], vt, np.eye(4), 0.0, 3)
+    s.decide([0.0, 0.0], NORTH, U, NORTH, U, [far])
+    assert 7 in s.released
+    later = Track(7, 0.0, collision[0] - vt * 600.0, vt, np.eye(4), 0.0, 3)  # tcpa now > 540 s
+    s.decide([0.0, 0.0], NORTH, U, NORTH, U, [later])
+    assert 7 in s.released
+
+
+def test_no_behaviour_heads_to_port_of_the_route_before_a_head_on_cpa():
+    # the own ship is right of its route: the guidance's LOS course points 30° to port of it
+    route = NORTH
+    s = Sbmpc()
+    tr = Track(3, 0.0, np.array([30.0, 4.0 * NMI]), np.array([0.0, -12.0 * KNOT]), np.eye(4), 0, 3)
+    d = s.decide([0.0, 0.0], NORTH, U, route + np.radians(30.0), U, [tr], path_course=route)
+    commanded = route + np.radians(30.0) + d.course_offset
+    assert np.degrees(commanded - route) <= SbmpcParams().port_limit_deg + 1e-9
+    assert d.encounter_open

@@ -61,6 +61,10 @@ class EncounterConfig:
     lookahead_lengths: float = 8.0  # LOS lookahead in own-ship lengths ...
     min_lookahead_m: float = 1000.0  # ... and at least this
     switch_lengths: float = 2.0  # leg switching radius in ship lengths
+    # the steepest return to the route [deg] while an encounter is open (None: the guidance's
+    # own): capping it at 8° raised COLREG compliance a little but doubled some paths and cut
+    # arrivals (docs/experiments/colav-tuning.md)
+    max_return_deg: float | None = None
     arrival_radius_m: float = 150.0  # the route is done this close to its end (evaluation: 200)
     length_scale: float = 1.0  # k of a Froude-scaled situation (1: the situation as written)
 
@@ -207,12 +211,20 @@ def build_encounter_diagram(
     tracker = b.AddNamedSystem(
         "ais_tracker", AisTrackerSystem(len(situation.targets), noise, cfg.ais_period_s)
     )
-    colav = b.AddNamedSystem("sbmpc_colav", SbmpcColav(sbmpc or params, cfg.colav_period_s))
+    colav = b.AddNamedSystem(
+        "sbmpc_colav",
+        SbmpcColav(
+            sbmpc or params,
+            cfg.colav_period_s,
+            None if cfg.max_return_deg is None else np.radians(cfg.max_return_deg),
+        ),
+    )
     b.Connect(targets.GetOutputPort("target_states"), ais.GetInputPort("target_states"))
     b.Connect(ais.GetOutputPort("ais_reports"), tracker.GetInputPort("ais_reports"))
     b.Connect(state, guidance.GetInputPort("state"))
     b.Connect(state, colav.GetInputPort("state"))
     b.Connect(guidance.GetOutputPort("nominal"), colav.GetInputPort("nominal"))
+    b.Connect(guidance.GetOutputPort("path_course"), colav.GetInputPort("path_course"))
     b.Connect(tracker.GetOutputPort("tracks"), colav.GetInputPort("tracks"))
     b.Connect(colav.GetOutputPort("command"), command)
     b.ExportOutput(state, "own_state")

@@ -63,9 +63,10 @@ INTEGRATION = SimulationConfig(integrator="runge_kutta3", accuracy=1e-4, max_ste
 
 
 def default_duration(situation: TrafficSituation, config: EncounterConfig) -> float:
-    """1.5 × the route's planned time + 10 min (× √k when Froude-scaled): room for the
-    detours, a stop for arrival."""
-    return 1.5 * route_time(situation) + 600.0 * np.sqrt(config.length_scale)
+    """2.5 × the route's planned time + 10 min (× √k when Froude-scaled): room for the
+    detours and for giving way by slowing down (an overtaking ship may follow at half speed for
+    a long while), a stop for arrival."""
+    return 2.5 * route_time(situation) + 600.0 * np.sqrt(config.length_scale)
 
 
 def colreg_params(config: EncounterConfig) -> ColregParams:

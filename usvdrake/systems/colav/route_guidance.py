@@ -3,7 +3,7 @@
 import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from usvdrake.systems.colav.route_los import advance_leg, arrived, los_course
+from usvdrake.systems.colav.route_los import advance_leg, arrived, leg_frame, los_course
 
 
 class RouteGuidance(LeafSystem):
@@ -17,9 +17,12 @@ class RouteGuidance(LeafSystem):
         output_ports:
         - nominal
         - mission_complete
+        - path_course
 
-    ``state`` = [x y ψ u v r]; ``nominal`` = [course [rad], speed [m/s]];
-    ``mission_complete`` = [1] within ``arrival_radius`` of the last waypoint. The active leg
+    ``state`` = [x y ψ u v r]; ``nominal`` = [course [rad], speed [m/s]]; ``path_course`` =
+    [the active leg's direction [rad]];
+    ``mission_complete`` = [1] within ``arrival_radius`` of the last waypoint. The LOS angle
+    towards the leg is at most ``max_correction`` [rad] (None: unlimited). The active leg
     lives in discrete state (advanced every ``period``); the outputs advance it afresh from the
     present position, so they never lag a leg behind.
     """
@@ -32,6 +35,7 @@ class RouteGuidance(LeafSystem):
         switch_radius: float,
         arrival_radius: float,
         period: float = 1.0,
+        max_correction: float | None = None,
     ):
         super().__init__()
         self._wps = np.asarray(waypoints, float).reshape(-1, 2)
@@ -41,12 +45,14 @@ class RouteGuidance(LeafSystem):
         self._lookahead = float(lookahead)
         self._switch = float(switch_radius)
         self._arrival = float(arrival_radius)
+        self._max_correction = max_correction  # [rad] the steepest return to the route
         self._state = self.DeclareVectorInputPort("state", 6)
         self._leg = self.DeclareDiscreteState(BasicVector([0.0]))
         self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
         deps = {self.xd_ticket(), self.input_port_ticket(self._state.get_index())}
         self.DeclareVectorOutputPort("nominal", 2, self._calc_nominal, deps)
         self.DeclareVectorOutputPort("mission_complete", 1, self._calc_complete, deps)
+        self.DeclareVectorOutputPort("path_course", 1, self._calc_path_course, deps)
 
     def _index(self, context) -> int:
         start = int(context.get_discrete_state(self._leg).GetAtIndex(0))
@@ -60,7 +66,13 @@ class RouteGuidance(LeafSystem):
         idx = self._index(context)
         pos = self._state.Eval(context)[:2]
         speed = self._speeds[min(idx, len(self._speeds) - 1)]  # the leg's planned speed
-        output.SetFromVector([los_course(self._wps, idx, pos, self._lookahead), speed])
+        output.SetFromVector(
+            [los_course(self._wps, idx, pos, self._lookahead, self._max_correction), speed]
+        )
+
+    def _calc_path_course(self, context, output):
+        _, e, _ = leg_frame(self._wps, min(self._index(context), len(self._wps) - 2))
+        output.SetFromVector([float(np.arctan2(e[1], e[0]))])
 
     def _calc_complete(self, context, output):
         pos = self._state.Eval(context)[:2]

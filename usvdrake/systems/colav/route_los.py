@@ -3,10 +3,11 @@
 Lookahead-based LOS (Fossen 2021, straight-line path following): χ = χ_path − atan(e / Δ)
 with e the cross-track error (positive left of the leg) and Δ the lookahead distance. A leg is
 done when the along-track position comes within `switch_radius` of its end. On the last leg,
-once the end is nearer than Δ, the course points at the end itself (a collision-avoidance
+once the end is nearer than Δ (or less than Δ ahead along the leg), the course points at the
+end itself (a collision-avoidance
 manoeuvre can leave the ship far abeam of the route near its end, and LOS alone would then sail
-past); the route is done within `arrival_radius` of its end or once past it along the last
-leg.
+past); the route is done within `arrival_radius` of its end or once past it along the last leg by
+more than that.
 """
 
 import numpy as np
@@ -33,22 +34,32 @@ def advance_leg(waypoints: np.ndarray, index: int, position, switch_radius: floa
 
 
 def arrived(waypoints: np.ndarray, position, arrival_radius: float) -> bool:
-    """Within `arrival_radius` of the route's end, or past it along the last leg (a ship that
-    comes abeam of the end farther out would otherwise circle it)."""
+    """Within `arrival_radius` of the route's end, or past it along the last leg by more than
+    the radius (a ship that misses the end still stops, rather than circling it)."""
     p = np.asarray(position, float)
     a, e, length = leg_frame(waypoints, len(waypoints) - 2)
-    return bool(np.hypot(*(p - waypoints[-1])) <= arrival_radius or (p - a) @ e >= length)
+    past = (p - a) @ e >= length + arrival_radius
+    return bool(np.hypot(*(p - waypoints[-1])) <= arrival_radius or past)
 
 
-def los_course(waypoints: np.ndarray, index: int, position, lookahead: float) -> float:
+def los_course(
+    waypoints: np.ndarray, index: int, position, lookahead: float, max_correction=None
+) -> float:
     """The course [rad, counter-clockwise from east] on leg `index`: LOS, or straight at the
-    route's end when it is the last leg and the end is within `lookahead`."""
+    route's end when it is the last leg and the end is within `lookahead`. `max_correction`
+    [rad]: the LOS angle towards the leg is at most this (a ship far abeam of its route after
+    an avoidance manoeuvre returns at a shallow angle, not by a turn the rules would read as
+    one to port)."""
     p = np.asarray(position, float)
     index = min(index, len(waypoints) - 2)
     to_end = waypoints[-1] - p
-    if index == len(waypoints) - 2 and np.hypot(*to_end) < lookahead:
-        return float(np.arctan2(to_end[1], to_end[0]))
-    a, e, _ = leg_frame(waypoints, index)
+    a, e, length = leg_frame(waypoints, index)
     rel = p - a
+    near_end = np.hypot(*to_end) < lookahead or rel @ e > length - lookahead
+    if index == len(waypoints) - 2 and near_end:  # the last stretch: straight at the end
+        return float(np.arctan2(to_end[1], to_end[0]))
     cross = e[0] * rel[1] - e[1] * rel[0]  # > 0: left of the leg, so steer right
-    return float(np.arctan2(e[1], e[0]) - np.arctan2(cross, lookahead))
+    correction = np.arctan2(cross, lookahead)
+    if max_correction is not None:
+        correction = np.clip(correction, -max_correction, max_correction)
+    return float(np.arctan2(e[1], e[0]) - correction)

@@ -78,6 +78,14 @@ class SbmpcParams:
     d_init: float = 8.0 * NMI  # targets farther than this are ignored
     stand_on_range: float = 1.0 * NMI  # stand-on: keep course and speed while farther ...
     stand_on_tcpa_fraction: float = 0.6  # ... and while time to CPA > this × horizon
+    # ... or while the nominal passing distance is at least this (the required CPA): then the
+    # give-way ship has acted enough, and a stand-on ship that moves would break Rule 17(a)
+    cpa_required: float = 0.5 * NMI
+    # while a head-on or give-way crossing target, or a stand-on crossing one (Rule 17(c)), is
+    # before its CPA, no behaviour may head more than this to port of the route (our rule:
+    # COLREGs Rules 14, 15 and 17(c) forbid the turn to port the prediction might prefer)
+    port_limit_deg: float = 8.0
+    k_forbidden: float = 1e6
     p: float = 1.0  # time exponent of R
     q: float = 4.0  # distance exponent of R
     k_coll: float = 1.0
@@ -107,6 +115,7 @@ class SbmpcParams:
         base = cls()
         kw = dict(
             d_safe=margin * cpa,
+            cpa_required=cpa,
             d_close=base.d_close * s,
             d_init=base.d_init * s,
             stand_on_range=base.stand_on_range * s,
@@ -126,6 +135,7 @@ class SbmpcDecision:
     costs: np.ndarray = field(repr=False)  # every behaviour's H_k
     min_distance: float  # predicted minimum distance to any target with the chosen behaviour
     active: bool  # False: no target in range, nominal (0, 1) returned
+    encounter_open: bool = False  # a relevant target is not yet past its closest approach
 
 
 def behaviours(params: SbmpcParams) -> tuple[np.ndarray, np.ndarray]:
@@ -192,6 +202,19 @@ def relevance(params: SbmpcParams, position, v0, tp, tv):
     return keep, range0, tcpa
 
 
+def stand_on_released(params: SbmpcParams, position, v0, tp, tv) -> np.ndarray:
+    """(M,) whether the own ship, if stand-on to each target, may act now (Rule 17(a)(ii)): the
+    target is within ``stand_on_range``, or the nominal CPA is nearer than the required one and
+    less than ``stand_on_tcpa_fraction`` of the horizon away."""
+    rel = np.asarray(tp, float).reshape(-1, 2) - np.asarray(position, dtype=float)
+    dv = np.asarray(tv, float).reshape(-1, 2) - v0
+    range0 = np.linalg.norm(rel, axis=1)
+    tcpa = -np.sum(rel * dv, axis=1) / np.maximum(np.sum(dv * dv, axis=1), 1e-12)
+    dcpa = np.linalg.norm(rel + dv * np.maximum(tcpa, 0.0)[:, None], axis=1)
+    soon = (tcpa <= params.stand_on_tcpa_fraction * params.horizon_s) & (dcpa < params.cpa_required)
+    return (range0 <= params.stand_on_range) | soon
+
+
 def hazard(
     params: SbmpcParams,
     position,
@@ -203,12 +226,14 @@ def hazard(
     target_velocities,
     last=(0.0, 1.0),
     roles=None,
+    released=None,
 ):
     """H_k of every behaviour and the predicted minimum distance of each: ((S,), (S,)).
 
     roles: optional (M, 4) booleans (head_on, give_way_crossing, stand_on, stand_on_crossing)
     per target, e.g. remembered from when the target first became relevant; classified from the
-    present geometry when None."""
+    present geometry when None. released: optional (M,) booleans, stand-on duties already
+    released (kept released by ``Sbmpc``, so the choice does not flip at the threshold)."""
     chi_k, fac_k = behaviours(params)
     last_chi, last_fac = last
     dchi = chi_k - last_chi
@@ -232,7 +257,10 @@ def hazard(
     if roles is None:
         roles = np.stack(classify(params, v0, tp - pos0, tv), axis=1)
     roles = np.asarray(roles, dtype=bool).reshape(-1, 4)[keep]
+    was_released = np.zeros(keep.size, bool) if released is None else np.asarray(released, bool)
+    release = stand_on_released(params, pos0, v0, tp, tv) | was_released
     tp, tv, range0, tcpa0 = tp[keep], tv[keep], range0[keep], tcpa0[keep]
+    release = release[keep]
     own_p, own_v, own_chi, t = predict_own(params, pos0, course, speed, course_ref, speed_ref)
     # Relative geometry target − own, (S, N+1, M) per component; targets at constant velocity.
     rx = (tp[:, 0] + t[:, None] * tv[:, 0])[None] - own_p[:, :, 0, None]
@@ -247,11 +275,7 @@ def hazard(
     c_cost = (params.k_coll / u_ref**2) * (dvx * dvx + dvy * dvy)
     tw = (params.horizon_s / np.maximum(t, params.dt_s)) ** params.p  # (N+1,)
     ratio = params.d_safe / np.maximum(dist, 1e-3 * params.d_safe)
-    holding = (
-        stand_on
-        & (range0 > params.stand_on_range)
-        & (tcpa0 > params.stand_on_tcpa_fraction * params.horizon_s)
-    )
+    holding = stand_on & ~release
     inside = (dist <= params.d_safe) & ~holding
     risk = np.where(inside, c_cost * tw[None, :, None] * ratio**params.q, 0.0)
     # COLREG violation μ: a head-on or give-way-crossing target close on our starboard side.
@@ -286,16 +310,19 @@ class Sbmpc:
         self.params = params or SbmpcParams()
         self.last = (0.0, 1.0)
         self.roles: dict = {}
+        self.released: set = set()  # track ids whose stand-on duty was released (latched)
         self._chi, self._fac = behaviours(self.params)
 
     def decide(
         self, position, course, speed, course_ref, speed_ref, tracks=None, *, positions=None,
-        velocities=None, ids=None,
+        velocities=None, ids=None, path_course=None,
     ) -> SbmpcDecision:  # fmt: skip
         """Choose (course offset, speed factor) from the own state (position [m], course [rad],
         speed [m/s]), the nominal course and speed from guidance, and the targets: `tracks`
         (objects with .position, .velocity and .target_id, e.g. tracking.Track) or arrays
-        (with `ids` to remember roles; without ids roles are classified afresh each call)."""
+        (with `ids` to remember roles; without ids roles are classified afresh each call).
+        `path_course`: the route's course, which the no-port-turn rule is measured from
+        (default the nominal course)."""
         if tracks is not None:
             positions = [tr.position for tr in tracks]
             velocities = [tr.velocity for tr in tracks]
@@ -304,7 +331,8 @@ class Sbmpc:
         tv = np.asarray(velocities if velocities is not None else [], float).reshape(-1, 2)
         pos0 = np.asarray(position, dtype=float)
         v0 = own_velocity(self.params, course, speed, course_ref)
-        keep = relevance(self.params, pos0, v0, tp, tv)[0]
+        keep, _, tcpa0 = relevance(self.params, pos0, v0, tp, tv)
+        encounter_open = bool(np.any(keep & (tcpa0 > 0.0)))
         roles = None
         if ids is not None:
             fresh = np.stack(classify(self.params, v0, tp - pos0, tv), axis=1).reshape(-1, 4)
@@ -314,13 +342,28 @@ class Sbmpc:
                 elif tid not in self.roles:
                     self.roles[tid] = fresh[i]
             roles = np.array([self.roles.get(tid, fresh[i]) for i, tid in enumerate(ids)])
+            now = stand_on_released(self.params, pos0, v0, tp, tv)
+            self.released = {tid for tid in self.released if tid in self.roles}
+            self.released |= {tid for i, tid in enumerate(ids) if keep[i] and now[i]}
+            released = np.array([tid in self.released for tid in ids], bool)
+        else:
+            released = None
         if not np.any(keep):
             self.last = (0.0, 1.0)
             i0 = int(np.argmin(np.abs(self._chi) + np.abs(1.0 - self._fac)))
             return SbmpcDecision(0.0, 1.0, i0, 0.0, np.zeros(self._chi.size), np.inf, False)
         costs, dmin = hazard(
-            self.params, pos0, course, speed, course_ref, speed_ref, tp, tv, self.last, roles
-        )
+            self.params, pos0, course, speed, course_ref, speed_ref, tp, tv, self.last, roles,
+            released,
+        )  # fmt: skip
+        if roles is not None:
+            duty = roles[:, 0] | roles[:, 1] | roles[:, 3]  # HO, GW crossing, SO crossing
+            if np.any(keep & (tcpa0 > 0.0) & duty):
+                ref = course_ref if path_course is None else path_course
+                port = wrap_angle(course_ref + self._chi - ref) > np.radians(
+                    self.params.port_limit_deg
+                )
+                costs = costs + np.where(port, self.params.k_forbidden, 0.0)
         k = int(np.argmin(costs))
         self.last = (float(self._chi[k]), float(self._fac[k]))
         return SbmpcDecision(
@@ -331,4 +374,5 @@ class Sbmpc:
             costs=costs,
             min_distance=float(dmin[k]),
             active=True,
+            encounter_open=encounter_open,
         )

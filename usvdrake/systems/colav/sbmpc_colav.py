@@ -12,7 +12,7 @@ from usvdrake.systems.colav.sbmpc import Sbmpc, SbmpcParams
 
 # colav_diagnostics layout
 DIAGNOSTICS = ("offset", "factor", "cost", "min_predicted_distance", "active", "decide_ms",
-               "decisions")  # fmt: skip
+               "decisions", "encounter_open")  # fmt: skip
 
 
 class SbmpcColav(LeafSystem):
@@ -26,6 +26,7 @@ class SbmpcColav(LeafSystem):
         input_ports:
         - state
         - nominal
+        - path_course (optional)
         - tracks
         output_ports:
         - command
@@ -34,22 +35,35 @@ class SbmpcColav(LeafSystem):
     ``state`` = own [x y ψ u v r]; ``nominal`` = [course [rad], speed [m/s]] from guidance;
     ``tracks``: a list of ``tracking.Track`` (the AIS tracker's; never the targets' truth);
     ``command`` = [course [rad], speed [m/s]]; ``colav_diagnostics`` = [offset [rad], factor,
-    cost, min_predicted_distance [m], active, decide_ms, decisions]. The ``Sbmpc`` (last choice,
+    cost, min_predicted_distance [m], active, decide_ms, decisions, encounter_open]. While an
+    encounter is open the guidance's pull back to the route (``path_course``, optional) is at
+    most ``max_return`` [rad]. The ``Sbmpc`` (last choice,
     remembered COLREG roles) is abstract state; the last decision is discrete state.
     """
 
-    def __init__(self, params: SbmpcParams | None = None, period: float = 5.0):
+    def __init__(
+        self,
+        params: SbmpcParams | None = None,
+        period: float = 5.0,
+        max_return: float | None = None,
+    ):
         super().__init__()
         if not period > 0.0:
             raise ValueError(f"SbmpcColav: period must be positive, got {period}")
         self._state = self.DeclareVectorInputPort("state", 6)
         self._nominal = self.DeclareVectorInputPort("nominal", 2)
+        self._path = self.DeclareVectorInputPort("path_course", 1)
+        self._max_return = max_return
         self._tracks = self.DeclareAbstractInputPort("tracks", AbstractValue.Make([]))
         self._sbmpc = self.DeclareAbstractState(AbstractValue.Make(Sbmpc(params)))
-        initial = np.array([0.0, 1.0, 0.0, np.inf, 0.0, 0.0, 0.0])
+        initial = np.array([0.0, 1.0, 0.0, np.inf, 0.0, 0.0, 0.0, 0.0])
         self._diag = self.DeclareDiscreteState(BasicVector(initial))
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
-        deps = {self.xd_ticket(), self.input_port_ticket(self._nominal.get_index())}
+        deps = {
+            self.xd_ticket(),
+            self.input_port_ticket(self._nominal.get_index()),
+            self.input_port_ticket(self._path.get_index()),
+        }
         self.DeclareVectorOutputPort("command", 2, self._calc_command, deps)
         self.DeclareStateOutputPort("colav_diagnostics", self._diag)
 
@@ -59,17 +73,27 @@ class SbmpcColav(LeafSystem):
         c, s = np.cos(psi), np.sin(psi)
         vx, vy = u * c - v * s, u * s + v * c  # velocity over ground: SB-MPC works in courses
         sbmpc = state.get_mutable_abstract_state(self._sbmpc).get_value()
+        path = float(self._path.Eval(context)[0]) if self._path.HasValue(context) else None
         t0 = time.perf_counter()
         d = sbmpc.decide(
             [x, y], float(np.arctan2(vy, vx)), float(np.hypot(vx, vy)), float(course_ref),
             float(speed_ref), self._tracks.Eval(context),
+            path_course=path,
         )  # fmt: skip
         ms = 1e3 * (time.perf_counter() - t0)
         count = context.get_discrete_state(self._diag).GetAtIndex(6) + 1.0
         row = [d.course_offset, d.speed_factor, d.cost, d.min_distance, float(d.active), ms, count]
+        row.append(float(d.encounter_open))
         state.get_mutable_discrete_state(self._diag).SetFromVector(row)
 
     def _calc_command(self, context, output):
-        offset, factor = context.get_discrete_state(self._diag).value()[:2]
+        diag = context.get_discrete_state(self._diag).value()
+        offset, factor, encounter_open = diag[0], diag[1], diag[7]
         course, speed = self._nominal.Eval(context)
+        if encounter_open and self._max_return is not None and self._path.HasValue(context):
+            # while a target is before its CPA, the guidance's pull back to the route is kept
+            # shallow: a steep return would be a turn to port, or a stand-on ship's deviation
+            path = self._path.Eval(context)[0]
+            pull = np.clip(wrap_angle(course - path), -self._max_return, self._max_return)
+            course = path + pull
         output.SetFromVector([wrap_angle(course + offset), speed * factor])
