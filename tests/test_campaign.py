@@ -15,7 +15,7 @@ from usvdrake.diagrams import check_scenario, load_scenario, with_overrides
 from usvdrake.diagrams.vessel_diagram import build_vessel_diagram
 from usvdrake.run.campaign import (
     RANGES,
-    _dask_client,
+    dask_client,
     draw_summary,
     is_timing_key,
     randomise,
@@ -63,7 +63,7 @@ def test_local_workers_get_one_thread_and_the_parent_keeps_its_environment(monke
             "OMP_NUM_THREADS",
         } & set(os.environ)
 
-    with _dask_client(1, None) as client:
+    with dask_client(1, None) as client:
         seen = client.run(lambda: (os.environ.get("NUMBA_NUM_THREADS"), os.getpid()))
         assert [v[0] for v in seen.values()] == ["1"]
         assert all(v[1] != os.getpid() for v in seen.values())

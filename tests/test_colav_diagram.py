@@ -15,7 +15,7 @@ from usvdrake.diagrams.encounter_diagram import (
     build_encounter_diagram,
     route_time,
 )
-from usvdrake.run.encounter import prepare, run_encounter
+from usvdrake.run.encounter import prepare, run_encounter, situation_paths
 from usvdrake.systems.colav.route_los import advance_leg, arrived, los_course
 from usvdrake.systems.colav.sbmpc import NMI
 from usvdrake.systems.colav.sbmpc_colav import DIAGNOSTICS, SbmpcColav
@@ -222,3 +222,8 @@ def test_roboat2_as_own_ship_on_a_froude_scaled_head_on(tmp_path):
     assert e.arrived and e.collisions == 0 and e.min_cpa_m >= r["safety_distance_m"]
     assert e.path_length_m < 200.0  # the 9.3 km route at 1/61 scale
     assert (tmp_path / "roboat" / "encounter.png").is_file()
+
+
+def test_a_shipped_situation_is_found_by_its_name():
+    assert situation_paths(["traffic_situation_01"]) == [DATA_DIR / "traffic_situation_01.json"]
+    assert len(situation_paths([])) == 40  # the standard set

@@ -9,11 +9,15 @@ from usvdrake.systems.colav.sbmpc import NMI
 
 
 def add_arguments(p) -> None:
-    p.add_argument("situation", help="a trafficgen traffic-situation JSON file")
+    p.add_argument(
+        "situation",
+        help="a trafficgen traffic-situation JSON file, or a shipped one's name "
+        "(traffic_situation_01 ... _40: DNV's standard set)",
+    )
     p.add_argument("--out", default="out/encounter", help="output folder (default: out/encounter)")
     add_config_arguments(p)
     p.add_argument(
-        "--duration", type=float, default=None, help="simulated time limit [s] (default: 1.5 × "
+        "--duration", type=float, default=None, help="simulated time limit [s] (default: 2.5 × "
         "the route's planned time + 600 s)"
     )  # fmt: skip
     p.add_argument("--quiet", action="store_true", help="no progress bar")

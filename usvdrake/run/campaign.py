@@ -244,7 +244,7 @@ def _failed(e: BaseException, tb: str | None = None, **extra) -> dict:
 
 
 @contextmanager
-def _dask_client(workers: int, scheduler: str | None):
+def dask_client(workers: int, scheduler: str | None):
     if scheduler:
         try:
             client = Client(scheduler, timeout="10s")
@@ -347,7 +347,7 @@ def run_campaign(
         rows.append(row)
 
     if texts:
-        with _dask_client(workers, scheduler) as client:
+        with dask_client(workers, scheduler) as client:
             tag = uuid.uuid4().hex[:12]  # fresh task keys: never a cached result of another run
             futures = {
                 client.submit(run_one, i, text, key=f"usvdrake-run-{i:04d}-{tag}"): i

@@ -33,7 +33,7 @@ from usvdrake.diagrams.encounter_diagram import (
     route_time,
 )
 from usvdrake.errors import ConfigError
-from usvdrake.run.campaign import _dask_client
+from usvdrake.run.campaign import dask_client
 from usvdrake.run.simulate import simulate
 from usvdrake.scenario import SimulationConfig
 from usvdrake.systems.colav.evaluation import (
@@ -95,12 +95,16 @@ def prepare(situation_path, own: str = SHIP, config: EncounterConfig | None = No
 
 
 def situation_paths(items) -> list[Path]:
-    """Situation files from files, folders (their ``*.json`` but ``encounter_settings.json``) or
-    the keyword ``standard`` (the 40 shipped ones); none given means ``standard``."""
+    """Situation files from files, folders (their ``*.json`` but ``encounter_settings.json``),
+    the keyword ``standard`` (the 40 shipped ones) or a shipped situation's name
+    (``traffic_situation_01``); none given means ``standard``."""
     items = list(items) or [STANDARD]
     paths: list[Path] = []
     for item in items:
         p = DATA_DIR if str(item) == STANDARD else Path(item)
+        shipped = DATA_DIR / f"{item}.json"
+        if not p.exists() and Path(str(item)).name == str(item) and shipped.is_file():
+            p = shipped  # a bare name: one of the shipped situations
         if p.is_dir():
             found = situation_files(p)
             if not found:
@@ -109,7 +113,9 @@ def situation_paths(items) -> list[Path]:
         elif p.is_file():
             paths.append(p)
         else:
-            raise ConfigError(p, "", "a situation file, a folder or 'standard'", "no such path")
+            raise ConfigError(
+                p, "", "a situation file, a folder, 'standard' or a shipped name", "no such path"
+            )
     return paths
 
 
@@ -284,7 +290,7 @@ def run_encounters(
 def _run_on_dask(files, out: Path, cfg, own, workers, scheduler, progress) -> tuple[dict, int]:
     """stem → encounter_task result of every file, and the number of workers used."""
     results = {}
-    with _dask_client(workers, scheduler) as client:
+    with dask_client(workers, scheduler) as client:
         tag = uuid.uuid4().hex[:12]  # fresh task keys: never a cached result of another run
         futures = [
             client.submit(
