@@ -1,6 +1,7 @@
 """Validation that cannot be slipped past: every number finite and within the ranges of
-``usvdrake.scenario.RANGES``, YAML 1.2 numbers, duplicate keys, names kept inside their folders,
-empty files, ``--out`` a file — each a one-line ConfigError (exit 2 on the command line)."""
+``usvdrake.scenario_ranges.RANGES``, YAML 1.2 numbers, duplicate keys, names kept inside their
+folders, empty files, ``--out`` a file — each a one-line ConfigError (exit 2 on the command
+line)."""
 
 import math
 import re

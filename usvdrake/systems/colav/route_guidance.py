@@ -21,8 +21,7 @@ class RouteGuidance(LeafSystem):
 
     ``state`` = [x y ψ u v r]; ``nominal`` = [course [rad], speed [m/s]]; ``path_course`` =
     [the active leg's direction [rad]];
-    ``mission_complete`` = [1] within ``arrival_radius`` of the last waypoint. The LOS angle
-    towards the leg is at most ``max_correction`` [rad] (None: unlimited). The active leg
+    ``mission_complete`` = [1] within ``arrival_radius`` of the last waypoint. The active leg
     lives in discrete state (advanced every ``period``); the outputs advance it afresh from the
     present position, so they never lag a leg behind.
     """
@@ -35,7 +34,6 @@ class RouteGuidance(LeafSystem):
         switch_radius: float,
         arrival_radius: float,
         period: float = 1.0,
-        max_correction: float | None = None,
     ):
         super().__init__()
         self._wps = np.asarray(waypoints, float).reshape(-1, 2)
@@ -45,7 +43,6 @@ class RouteGuidance(LeafSystem):
         self._lookahead = float(lookahead)
         self._switch = float(switch_radius)
         self._arrival = float(arrival_radius)
-        self._max_correction = max_correction  # [rad] the steepest return to the route
         self._state = self.DeclareVectorInputPort("state", 6)
         self._leg = self.DeclareDiscreteState(BasicVector([0.0]))
         self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
@@ -66,9 +63,7 @@ class RouteGuidance(LeafSystem):
         idx = self._index(context)
         pos = self._state.Eval(context)[:2]
         speed = self._speeds[min(idx, len(self._speeds) - 1)]  # the leg's planned speed
-        output.SetFromVector(
-            [los_course(self._wps, idx, pos, self._lookahead, self._max_correction), speed]
-        )
+        output.SetFromVector([los_course(self._wps, idx, pos, self._lookahead), speed])
 
     def _calc_path_course(self, context, output):
         _, e, _ = leg_frame(self._wps, min(self._index(context), len(self._wps) - 2))

@@ -42,14 +42,10 @@ def arrived(waypoints: np.ndarray, position, arrival_radius: float) -> bool:
     return bool(np.hypot(*(p - waypoints[-1])) <= arrival_radius or past)
 
 
-def los_course(
-    waypoints: np.ndarray, index: int, position, lookahead: float, max_correction=None
-) -> float:
+def los_course(waypoints: np.ndarray, index: int, position, lookahead: float) -> float:
     """The course [rad, counter-clockwise from east] on leg `index`: LOS, or straight at the
-    route's end when it is the last leg and the end is within `lookahead`. `max_correction`
-    [rad]: the LOS angle towards the leg is at most this (a ship far abeam of its route after
-    an avoidance manoeuvre returns at a shallow angle, not by a turn the rules would read as
-    one to port)."""
+    route's end on the last leg once the end is within `lookahead` (straight-line or along the
+    leg)."""
     p = np.asarray(position, float)
     index = min(index, len(waypoints) - 2)
     to_end = waypoints[-1] - p
@@ -59,7 +55,4 @@ def los_course(
     if index == len(waypoints) - 2 and near_end:  # the last stretch: straight at the end
         return float(np.arctan2(to_end[1], to_end[0]))
     cross = e[0] * rel[1] - e[1] * rel[0]  # > 0: left of the leg, so steer right
-    correction = np.arctan2(cross, lookahead)
-    if max_correction is not None:
-        correction = np.clip(correction, -max_correction, max_correction)
-    return float(np.arctan2(e[1], e[0]) - correction)
+    return float(np.arctan2(e[1], e[0]) - np.arctan2(cross, lookahead))
