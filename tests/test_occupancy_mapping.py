@@ -160,3 +160,22 @@ def test_sensor_off_grid_and_laser_scan_message():
     grid.insert_laser_scan((-50.0, -50.0, 0.0), scan)  # never reaches the grid: no-op
     with pytest.raises(ValueError):
         LogOddsGrid((0.0, 0.0), RES, (10, 10), l_occ=-1.0)
+
+
+def test_shared_copy_is_independent_once_either_writes():
+    """Copy on write: Drake clones the SLAM state at every update, so copies share the arrays
+    until one of them inserts a scan; neither may then see the other's scans."""
+    angles = np.linspace(-np.pi, np.pi, 90, endpoint=False)
+    grid = LogOddsGrid((-10.0, -10.0), 0.1, (200, 200))
+    grid.insert_scan((0.0, 0.0, 0.0), np.full(90, 4.0), angles, 8.0)
+    before = grid.log_odds.copy()
+    copy_ = grid.shared_copy()
+    assert np.shares_memory(copy_._sum, grid._sum)  # nothing written yet: no copy paid
+    copy_.insert_scan((2.0, 1.0, 0.3), np.full(90, 3.0), angles, 8.0)
+    assert np.array_equal(grid.log_odds, before)
+    grid.insert_scan((-3.0, 0.0, 0.0), np.full(90, 2.0), angles, 8.0)
+    other = LogOddsGrid((-10.0, -10.0), 0.1, (200, 200))
+    for pose, r in (((0.0, 0.0, 0.0), 4.0), ((2.0, 1.0, 0.3), 3.0)):
+        other.insert_scan(pose, np.full(90, r), angles, 8.0)
+    assert np.array_equal(copy_.log_odds, other.log_odds)
+    assert not np.array_equal(grid.log_odds, copy_.log_odds)

@@ -22,6 +22,8 @@ Frames: the grid's cell (row, col) covers x ∈ origin_x + [col, col+1)·resolut
 y ∈ origin_y + [row, row+1)·resolution, as :class:`usvdrake.worlds.world.OccupancyGrid`.
 """
 
+import copy
+
 import numpy as np
 
 from usvdrake.sensors.messages import LaserScan
@@ -123,6 +125,14 @@ class LogOddsGrid:
         self._sum = np.zeros(self.shape, np.int64)  # [_QUANTUM] unclamped Σ of updates
         self._count = np.zeros(self.shape, np.int32)  # scans that observed each cell
         self._scratch = _Scratch()
+        self._shared = False  # _sum/_count may be another grid's too: copy before writing
+
+    def shared_copy(self) -> "LogOddsGrid":
+        """A copy that shares the arrays until either grid writes (copy on write): Drake clones
+        a Context's abstract state at every update, and most updates never touch the map."""
+        other = copy.copy(self)
+        self._shared = other._shared = True
+        return other
 
     @property
     def l_occ(self) -> float:
@@ -226,6 +236,8 @@ class LogOddsGrid:
         mark = mark.reshape(h, w)[rlo - rmin : rhi - rmin, clo - cmin : chi - cmin]
         window = (slice(rlo, rhi), slice(clo, chi))
         delta = self._scratch.get("delta", mark.shape, np.int32)
+        if self._shared:
+            self._sum, self._count, self._shared = self._sum.copy(), self._count.copy(), False
         lut = np.array([0, sign * self._q_free, sign * self._q_occ], np.int32)
         np.take(lut, mark, out=delta)
         self._sum[window] += delta

@@ -42,6 +42,7 @@ class GraphSlam(TrackingMixin, OdometryMixin, LoopMixin, RelinkMixin, Optimisati
         self._last_dt = 0.0  # [s] between the last two tracked scans
         self._twist: np.ndarray | None = None  # (v_x, v_y, ω) of the sensor, smoothed
         self._fail_streak = 0  # tracking matches failed in a row
+        self._loop_from: int | None = None  # the last node that looked for loops (loop_spacing)
         self._rejected: frozenset[int] = frozenset()  # loop constraints GNC called outliers
         # [m] (x, y) of every node, kept with Node.pose: the loop candidates' distances
         self._xy = np.zeros((0, 2))
@@ -91,7 +92,7 @@ class GraphSlam(TrackingMixin, OdometryMixin, LoopMixin, RelinkMixin, Optimisati
             if np.hypot(*(other.pose[:2] - node.pose[:2])) <= self.cfg.link_radius:
                 self._link(i, k, robust=False, kind="link")
         loop = False
-        for i in self._loop_candidates(k):
+        for i in self._loop_candidates(k) if self._loop_due(k) else ():
             loop |= self._link(i, k, robust=self.cfg.loop_robust, kind="loop", search=True)
         t0 = time.perf_counter()
         self.optimise(full=False)
@@ -99,6 +100,19 @@ class GraphSlam(TrackingMixin, OdometryMixin, LoopMixin, RelinkMixin, Optimisati
         if loop:
             self.stats["loops"] += 1
             self.full_pending = True  # the whole graph, at the caller's pace (optimise_pending)
+
+    def _loop_due(self, k: int) -> bool:
+        """Whether node ``k`` looks for loops: always, or with ``loop_spacing`` once the graph
+        has gone that far (or turned 1 rad) since the last node that looked."""
+        if self.cfg.loop_spacing <= 0:
+            return True
+        last = self._loop_from
+        if last is not None:
+            d = between(self.nodes[last].pose, self.nodes[k].pose)
+            if np.hypot(d[0], d[1]) < self.cfg.loop_spacing and abs(d[2]) < 1.0:
+                return False
+        self._loop_from = k
+        return True
 
     # --- the scan-SLAM backend protocol of ``LidarSlam2D`` ------------------------------------
     def process_scan(self, scan, max_range: float | None = None, odometry=None) -> None:
@@ -159,7 +173,7 @@ class GraphSlam(TrackingMixin, OdometryMixin, LoopMixin, RelinkMixin, Optimisati
         """A structural copy: node scans (points, ranges, angles, KD-tree) and constraints never
         change after creation, so copies share them; poses, the map's arrays and the statistics
         are copied. Drake copies a Context's abstract state on every update, so this keeps a
-        LeafSystem's state independent per Context at the cost of the map arrays only."""
+        LeafSystem's state independent per Context; the map's arrays are copied on write."""
         other = copy.copy(self)
         other.nodes = [copy.copy(n) for n in self.nodes]
         for n in other.nodes:
@@ -172,7 +186,6 @@ class GraphSlam(TrackingMixin, OdometryMixin, LoopMixin, RelinkMixin, Optimisati
             self._rel.copy(),
             self._last_step.copy(),
         )
-        other.map = copy.copy(self.map)
-        other.map._sum, other.map._count = self.map._sum.copy(), self.map._count.copy()
+        other.map = self.map.shared_copy()
         other.stats = {k: (list(v) if isinstance(v, list) else v) for k, v in self.stats.items()}
         return other
