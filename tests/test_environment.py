@@ -13,6 +13,7 @@ from usvdrake.systems.vessel.environment_model import (
     gauss_markov_step,
     make_waves,
     pierson_moskowitz,
+    wave_acceleration,
     white_sample,
 )
 from usvdrake.vessel import load_vessel
@@ -94,3 +95,21 @@ def test_environment_system_is_deterministic_and_off_by_default():
         outs.append(env.GetOutputPort("tau_env").Eval(sim.get_context()).copy())
     np.testing.assert_array_equal(outs[0], outs[1])
     assert outs[0][0] != 0.0
+
+
+def test_wave_force_is_the_two_strip_sum_of_the_wave_accelerations():
+    """The vectorised two-strip force against wave_acceleration evaluated at each strip."""
+    v = load_vessel("roboat2")
+    cfg = EnvironmentConfig(waves=WaveConfig(significant_height=0.3, peak_period=2.5))
+    model = EnvironmentModel(cfg, v, seed=7)
+    h, half = v.hydrodynamics, 0.25 * v.hull.length
+    rng = np.random.default_rng(0)
+    for _ in range(100):
+        q, t = rng.normal(size=6) * [50, 50, 3, 1, 1, 0.5], rng.uniform(0, 300)
+        c, s = np.cos(q[2]), np.sin(q[2])
+        expected = np.zeros(3)
+        for x in (half, -half):
+            a = wave_acceleration(model.waves, q[:2] + x * np.array([c, s]), t)
+            ab = np.array([c * a[0] + s * a[1], -s * a[0] + c * a[1]])
+            expected += [0.5 * h.m11 * ab[0], 0.5 * h.m22 * ab[1], 0.5 * h.m22 * ab[1] * x]
+        np.testing.assert_allclose(model.wave_force(q, t), expected, rtol=1e-9, atol=1e-9)

@@ -7,7 +7,11 @@ from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from scipy.integrate import solve_ivp
 
-from usvdrake.systems.vessel.vessel_dynamics import straight_run_jacobian
+from usvdrake.systems.vessel.vessel_dynamics import (
+    straight_run_jacobian,
+    vessel_derivatives,
+    vessel_derivatives_float,
+)
 from usvdrake.systems.vessel.vessel_plant import VesselPlant, VesselPlant_
 from usvdrake.vessel import load_vessel
 
@@ -158,3 +162,14 @@ def test_scalar_conversion_symbolic_and_autodiff():
 def test_bad_initial_state_is_rejected():
     with pytest.raises(ValueError, match="6 values"):
         VesselPlant(load_vessel("roboat2"), [0, 0, 0])
+
+
+@pytest.mark.parametrize("name", ["roboat2", "usv2000", "ntnu_round"])
+def test_the_float_derivatives_equal_the_scalar_generic_ones(name):
+    xi = load_vessel(name).hydrodynamics
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        q = rng.normal(size=6) * [9, 9, 3, 1, 1, 0.5]
+        tau, env, cur = rng.normal(size=3) * 50, rng.normal(size=3) * 10, rng.normal(size=2)
+        a = vessel_derivatives(xi, q, tau, env, cur)
+        np.testing.assert_allclose(vessel_derivatives_float(xi, q, tau, env, cur), a, rtol=1e-14)

@@ -21,6 +21,7 @@ with w_k drawn from a generator seeded by (seed, stream, k): the same seed and s
 number whatever else ran before, so a diagram can be re-simulated and reset freely.
 """
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -160,13 +161,14 @@ class EnvironmentModel:
         speed = w.mean_speed + gust
         if w.mean_speed == 0.0 and w.gust_std == 0.0:
             return np.zeros(3)
-        b = np.deg2rad(w.direction_deg)
-        psi = q[2]
-        c, s = np.cos(psi), np.sin(psi)
-        vw = speed * np.array([np.cos(b), np.sin(b)])
-        u_rw = q[3] - (c * vw[0] + s * vw[1])
-        v_rw = q[4] - (-s * vw[0] + c * vw[1])
-        v_rel = np.hypot(u_rw, v_rw)
+        # scalar math: the plant asks for this at every integrator stage (~1000 times per s)
+        b = math.radians(w.direction_deg)
+        psi = float(q[2])
+        c, s = math.cos(psi), math.sin(psi)
+        vw0, vw1 = speed * math.cos(b), speed * math.sin(b)
+        u_rw = float(q[3]) - (c * vw0 + s * vw1)
+        v_rw = float(q[4]) - (-s * vw0 + c * vw1)
+        v_rel = math.hypot(u_rw, v_rw)
         k = 0.5 * w.air_density
         return np.array(
             [
@@ -180,16 +182,24 @@ class EnvironmentModel:
         """First-order wave force/moment [N, N, N m] in the body frame (two-strip inertia model)."""
         if self.waves is None:
             return np.zeros(3)
-        h = self.vessel.hydrodynamics
-        psi = q[2]
-        c, s = np.cos(psi), np.sin(psi)
+        h, waves = self.vessel.hydrodynamics, self.waves
+        psi = float(q[2])
+        c, s = math.cos(psi), math.sin(psi)
+        half = 0.25 * self.vessel.hull.length
+        d0, d1 = math.cos(waves.direction), math.sin(waves.direction)
+        # both strips (bow x = +L/4, stern x = −L/4) in one evaluation of the spectrum's
+        # components; the same sum as wave_acceleration at each strip's point
+        along = d0 * float(q[0]) + d1 * float(q[1])
+        offset = half * (d0 * c + d1 * s)
+        theta = waves.wavenumber * np.array([[along + offset], [along - offset]])
+        theta += waves.phase - waves.omega * t
+        mag = np.sin(theta) @ (waves.amplitude * waves.omega**2)
         tau = np.zeros(3)
-        for x_strip in (0.25 * self.vessel.hull.length, -0.25 * self.vessel.hull.length):
-            p = q[:2] + x_strip * np.array([c, s])
-            a = wave_acceleration(self.waves, p, t)
-            ab = np.array([c * a[0] + s * a[1], -s * a[0] + c * a[1]])
-            f = 0.5 * np.array([h.m11 * ab[0], h.m22 * ab[1]])
-            tau += [f[0], f[1], x_strip * f[1]]
+        for x_strip, m in ((half, float(mag[0])), (-half, float(mag[1]))):
+            ax, ay = m * d0, m * d1
+            f0 = 0.5 * h.m11 * (c * ax + s * ay)
+            f1 = 0.5 * h.m22 * (-s * ax + c * ay)
+            tau += (f0, f1, x_strip * f1)
         return tau
 
     def tau_env(self, q: np.ndarray, t: float, gust: float) -> np.ndarray:

@@ -6,7 +6,7 @@ from pydrake.common.containers import namedview
 from pydrake.systems.framework import BasicVector_, LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from usvdrake.systems.vessel.vessel_dynamics import vessel_derivatives
+from usvdrake.systems.vessel.vessel_dynamics import vessel_derivatives, vessel_derivatives_float
 from usvdrake.vessel import VesselParams
 
 VesselState = namedview("VesselState", ["x", "y", "psi", "u", "v", "r"])
@@ -43,6 +43,8 @@ def VesselPlant_(T):
             if q0.shape != (6,):
                 raise ValueError(f"VesselPlant: initial_state needs 6 values, got {q0.shape}")
             self._initial_state = q0
+            # floats take the scalar-math path; AutoDiffXd / Expression the generic one
+            self._derivatives = vessel_derivatives_float if T is float else vessel_derivatives
             self.DeclareContinuousState(BasicVector_[T](q0), 3, 3, 0)
             self._tau = self.DeclareVectorInputPort("tau", 3)
             self._tau_env = self.DeclareVectorInputPort("tau_env", 3)
@@ -69,7 +71,7 @@ def VesselPlant_(T):
             # Drake's Build() probes feedthrough with NaN inputs: NaN in, NaN out, no warning
             # (a NaN reaching the integrator in a real run stops it with its own error).
             with np.errstate(invalid="ignore"):
-                return vessel_derivatives(
+                return self._derivatives(
                     self._params.hydrodynamics,
                     q,
                     self._tau.Eval(context),
