@@ -1,18 +1,23 @@
-"""Vectorised ray casting against a world's solids (Drake has no ray-cast query: its issue 15260).
+"""Ray casting against a world's solids (Drake has no ray-cast query: its issue 15260).
 
-The acceleration structure (:class:`Scene`, built once per world) packs every solid into arrays:
-bounding circles for culling, the footprint's edge half-planes (padded to a common count),
-z ranges, an optional extra cutting plane, and circles for cylinders.
+The acceleration structure (:class:`Scene`, built once per world) packs every solid into flat
+arrays: bounding circles for culling, the footprint's edge half-planes and corners (one run per
+solid, indexed by ``edge_ptr``), z ranges, an optional extra cutting plane, and circles for
+cylinders.
 
-A scan is cast as a *depth buffer over azimuth columns* (:func:`cast`): each solid that can be
-within range covers an interval of columns as seen from the sensor (from its bounding circle),
-which expands into (solid, column) pairs — only the rays that can hit it. For each pair the exact
-2D interval [t_in, t_out] of horizontal distance along the column's direction is computed once
-(Cyrus-Beck clipping against the footprint's edges; the quadratic for circles); each ring of
-elevation e then only adds its z slab (z_min ≤ z_s + t·tan e ≤ z_max) and the cutting plane, and
-the nearest entry per ray is kept with ``np.minimum.at``. Rays end at the water surface (calm
-water returns nothing to a lidar). Exact for boxes, prisms, cylinders and planes; no Python loop
-over rays or solids.
+A scan is cast as a *depth buffer over azimuth columns* (:func:`cast`), in one compiled numba
+kernel (no per-scan array calls): each solid that can be within range covers an interval of
+columns as seen from the sensor (from its corners' bearings, or its bounding circle; the angles
+from a polynomial arctangent, widened by its error bound), so only the rays that can hit it are
+tested. Solids are visited nearest first, and a (solid, column) pair is skipped when the solid
+cannot come nearer than what every ring of that column already holds (occlusion). For each pair
+the exact 2D interval [t_in, t_out] of horizontal distance along the column's direction is
+computed once (Cyrus-Beck 1978 clipping against the footprint's edges; the quadratic for
+circles); each ring of elevation e then only adds its z slab (z_min ≤ z_s + t·tan e ≤ z_max)
+and the cutting plane, and the nearest entry per ray is kept. Rays end at the water surface
+(calm water returns nothing to a lidar). Exact for boxes, prisms, cylinders and planes; the
+culling and the skip only drop pairs that cannot change a range, so the ranges equal those of
+casting every solid at every column, in the same floating-point operations.
 
 Ray parameter t is the *horizontal* distance; the range along the beam is t / cos e.
 """
@@ -20,43 +25,53 @@ Ray parameter t is the *horizontal* distance; the range along the beam is t / co
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from usvdrake.worlds.solids import Solid
 
 TWO_PI = 2.0 * np.pi
+ATAN_ERR = 1e-7  # [rad] > the summed error of _fast_atan2's angles in one culling span
 
 
 @dataclass
 class Scene:
-    """Packed solids. Prisms and cylinders share the index space [0, n_prisms + n_cylinders)."""
+    """Packed solids. Prisms and cylinders share the index space [0, n_prisms + n_cylinders);
+    solid i's edges and corners are rows edge_ptr[i]:edge_ptr[i + 1] (none for cylinders)."""
 
     centre: np.ndarray  # (N, 2) bounding-circle centres [m]
     radius: np.ndarray  # (N,) bounding-circle radii [m]
     z_min: np.ndarray  # (N,)
     z_max: np.ndarray  # (N,)
     is_cyl: np.ndarray  # (N,) bool
-    edge_n: np.ndarray  # (N, K, 2) outward edge normals (zeros: padding / cylinders)
-    edge_d: np.ndarray  # (N, K) offsets (padding: 1, always satisfied)
+    edge_ptr: np.ndarray  # (N + 1,) int64 row offsets into edge_n, edge_d, corners
+    edge_n: np.ndarray  # (E, 2) outward edge normals
+    edge_d: np.ndarray  # (E,) offsets: n·p ≤ d inside
+    corners: np.ndarray  # (E, 2) footprint corners
     cyl: np.ndarray  # (N, 3) circle (x, y, r) for cylinders
     cut: np.ndarray  # (N, 4) extra plane n·p ≤ d (padding: 0, 0, 0, 1)
-    corners: np.ndarray  # (N, K, 2) footprint corners (padding repeats the last; cylinders: centre)
+    has_cut: np.ndarray  # (N,) bool
     kind: np.ndarray  # (N,) str, the solids' kinds
 
     @classmethod
     def from_solids(cls, solids: list[Solid]) -> "Scene":
         n = len(solids)
-        k = max([len(s.polygon) for s in solids if s.polygon is not None] + [3])
+        counts = [0 if s.is_cylinder else len(s.polygon) for s in solids]
+        ptr = np.zeros(n + 1, np.int64)
+        ptr[1:] = np.cumsum(counts)
+        e = int(ptr[-1])
         scene = cls(
             centre=np.zeros((n, 2)),
             radius=np.zeros(n),
             z_min=np.zeros(n),
             z_max=np.zeros(n),
             is_cyl=np.zeros(n, bool),
-            edge_n=np.zeros((n, k, 2)),
-            edge_d=np.ones((n, k)),
+            edge_ptr=ptr,
+            edge_n=np.zeros((e, 2)),
+            edge_d=np.zeros(e),
+            corners=np.zeros((e, 2)),
             cyl=np.zeros((n, 3)),
             cut=np.tile([0.0, 0.0, 0.0, 1.0], (n, 1)),
-            corners=np.zeros((n, k, 2)),
+            has_cut=np.zeros(n, bool),
             kind=np.array([s.kind for s in solids], dtype=object),
         )
         for i, s in enumerate(solids):
@@ -66,15 +81,14 @@ class Scene:
             if s.is_cylinder:
                 scene.is_cyl[i] = True
                 scene.cyl[i] = s.circle
-                scene.corners[i] = s.circle[:2]
             else:
                 normals, offsets = s.edge_planes()
-                scene.edge_n[i, : len(offsets)] = normals
-                scene.edge_d[i, : len(offsets)] = offsets
-                scene.corners[i, : len(s.polygon)] = s.polygon
-                scene.corners[i, len(s.polygon) :] = s.polygon[-1]
+                scene.edge_n[ptr[i] : ptr[i + 1]] = normals
+                scene.edge_d[ptr[i] : ptr[i + 1]] = offsets
+                scene.corners[ptr[i] : ptr[i + 1]] = s.polygon
             if s.cut is not None:
                 scene.cut[i] = s.cut
+                scene.has_cut[i] = any(v != 0.0 for v in s.cut[:3])
         return scene
 
     def __len__(self) -> int:
@@ -98,6 +112,223 @@ class ColumnLayout:
         return self.az0 + self.daz * np.arange(self.count)
 
 
+@njit(cache=True, inline="always")
+def _fast_atan2(y, x):
+    """atan2 within 2e-8 rad at a fraction of libm's cost: the octant polynomial of Abramowitz &
+    Stegun 4.4.49 (Hastings). Culling widens its angles by ATAN_ERR, so it stays conservative."""
+    ax, ay = abs(x), abs(y)
+    hi = max(ax, ay)
+    if hi == 0.0:
+        return 0.0
+    z = min(ax, ay) / hi
+    q = z * z
+    p = -0.0161657367 + q * 0.0028662257
+    p = -0.0752896400 + q * (0.0429096138 + q * p)
+    p = -0.1420889944 + q * (0.1065626393 + q * p)
+    r = z * (1.0 + q * (-0.3333314528 + q * (0.1999355085 + q * p)))
+    if ay > ax:
+        r = 0.5 * np.pi - r
+    if x < 0.0:
+        r = np.pi - r
+    return -r if y < 0.0 else r
+
+
+@njit(cache=True)
+def _span(s, centre, radius, is_cyl, edge_ptr, edge_n, edge_d, corners, ox, oy, view, reach, mg):
+    """(first column modulo the full circle, number of columns, a lower bound of the distance
+    [m]) of what solid s may cover seen from (ox, oy) or within ``margin`` of it: prisms by the
+    bearings of their corners, cylinders by their circle; no columns if out of reach.
+    ``view`` = (heading + az0, daz, full-circle columns); ``mg`` = (margin [m]: how far the
+    sensor moves during the sweep, slack [rad]: how far its heading turns)."""
+    look, daz, full = view
+    margin, slack = mg
+    relx, rely = centre[s, 0] - ox, centre[s, 1] - oy
+    dist = np.sqrt(relx * relx + rely * rely)  # libm's hypot costs more than the cull
+    rad = radius[s] + margin
+    near = dist - rad
+    if not near < reach:
+        return 0, 0, near
+    mid = _fast_atan2(rely, relx)
+    if is_cyl[s]:
+        if dist <= rad:
+            return 0, full, near
+        half = _fast_atan2(rad, np.sqrt((dist - rad) * (dist + rad)))  # arcsin(rad / dist)
+    else:
+        a, b = edge_ptr[s], edge_ptr[s + 1]
+        out_by = -np.inf  # a lower bound of the distance to the footprint
+        for k in range(a, b):
+            out_by = max(out_by, edge_n[k, 0] * ox + edge_n[k, 1] * oy - edge_d[k])
+        near = max(near, out_by - margin)
+        if out_by <= margin:
+            return 0, full, near
+        # The bearings of the corners bound what a prism covers (far tighter than the bounding
+        # circle for long walls), widened by what the sweep's motion can change.
+        lo_b, hi_b = np.inf, -np.inf
+        for k in range(a, b):
+            bearing = _fast_atan2(corners[k, 1] - oy, corners[k, 0] - ox) - mid
+            if bearing > np.pi:
+                bearing -= TWO_PI
+            elif bearing < -np.pi:
+                bearing += TWO_PI
+            lo_b, hi_b = min(lo_b, bearing), max(hi_b, bearing)
+        mid += (lo_b + hi_b) / 2
+        half = (hi_b - lo_b) / 2
+        half += _fast_atan2(margin, np.sqrt((out_by - margin) * (out_by + margin)))
+    half += slack + ATAN_ERR
+    if half >= np.pi:
+        return 0, full, near
+    step = abs(daz)
+    lo = ((1.0 if daz > 0 else -1.0) * (mid - look) - half) % TWO_PI  # from column 0, beam-wise
+    k0 = int(np.ceil(lo / step - 1e-9))
+    count = int(np.floor((lo + 2 * half) / step + 1e-9)) - k0 + 1
+    return k0, min(max(count, 0), full), near
+
+
+@njit(cache=True)
+def _spans(centre, radius, is_cyl, edge_ptr, edge_n, edge_d, corners, ox, oy, view, reach, mg):
+    n = len(radius)
+    k0, count = np.zeros(n, np.int64), np.zeros(n, np.int64)
+    for s in range(n):
+        k0[s], count[s], _ = _span(
+            s, centre, radius, is_cyl, edge_ptr, edge_n, edge_d, corners, ox, oy, view, reach, mg
+        )
+    return k0, count
+
+
+@njit(cache=True, inline="always")
+def _interval_2d(s, is_cyl, edge_ptr, edge_n, edge_d, cyl, ox, oy, hx, hy):
+    """Exact [t_in, t_out] of horizontal distance where the line o + t h is inside solid s's
+    footprint: the quadratic for a circle, Cyrus-Beck 1978 clipping against a polygon's edges."""
+    if is_cyl[s]:
+        fx, fy = ox - cyl[s, 0], oy - cyl[s, 1]
+        b = fx * hx + fy * hy
+        disc = b * b - (fx * fx + fy * fy - cyl[s, 2] ** 2)
+        if disc < 0:
+            return np.inf, -np.inf
+        root = np.sqrt(disc)
+        return -b - root, -b + root
+    enter, leave = -np.inf, np.inf
+    for k in range(edge_ptr[s], edge_ptr[s + 1]):
+        nx, ny = edge_n[k, 0], edge_n[k, 1]
+        den = nx * hx + ny * hy
+        num = edge_d[k] - nx * ox - ny * oy
+        if den < 0:
+            enter = max(enter, num / den)
+        elif den > 0:
+            leave = min(leave, num / den)
+        elif num < 0:  # parallel to the edge and outside it
+            return np.inf, -np.inf
+    return enter, leave
+
+
+@njit(cache=True)
+def _cast_kernel(
+    centre, radius, is_cyl, edge_ptr, edge_n, edge_d, corners, z_min, z_max, cyl, cut, has_cut,
+    az0, daz, ncols, full, tan_e, pose, col_xy, col_psi, ranges, water, cull,
+):  # fmt: skip
+    """The depth buffer (rings × ncols) of :func:`cast`; pose = (x, y, z, heading), ranges =
+    (max, min), water: the water level (NaN: none); col_xy, col_psi empty when standing."""
+    ox0, oy0, oz, heading = pose
+    max_range, min_range = ranges
+    rings = len(tan_e)
+    moving_xy, moving_psi = len(col_xy) > 0, len(col_psi) > 0
+    out = np.full((rings, ncols), np.inf)
+    cos_e, inv, limit = np.empty(rings), np.empty(rings), np.empty(rings)
+    for r in range(rings):
+        cos_e[r] = 1.0 / np.sqrt(1.0 + tan_e[r] ** 2)
+        inv[r] = 0.0 if tan_e[r] == 0.0 else 1.0 / tan_e[r]
+        limit[r] = max_range * cos_e[r]
+        if oz > water and tan_e[r] < 0:  # NaN water compares false: no water plane
+            limit[r] = min(limit[r], (water - oz) / tan_e[r])
+    # How far the sensor moves and turns during the sweep widen the culling. Only culling uses
+    # them, and it has a column of slack, so the cheap forms (no sqrt, no mod per column) do.
+    margin2, slack = 0.0, 0.0
+    for c in range(len(col_xy)):
+        margin2 = max(margin2, (col_xy[c, 0] - ox0) ** 2 + (col_xy[c, 1] - oy0) ** 2)
+    for c in range(len(col_psi)):
+        turn = abs(col_psi[c] - heading)
+        slack = max(slack, turn if turn <= np.pi else abs((turn + np.pi) % TWO_PI - np.pi))
+    margin = np.sqrt(margin2)
+    view = (heading + az0, daz, full)
+    mg = (margin, slack + abs(daz))
+    # Culling, then the candidates nearest first: a pair whose solid cannot come nearer than
+    # what its column already holds is skipped (occlusion), which saves most pairs behind a
+    # shore. ``near`` is a lower bound of the horizontal distance from any column's origin.
+    n = len(radius)
+    cand, k0s, counts = np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n, np.int64)
+    near = np.empty(n)
+    m = 0
+    for s in range(n):
+        if cull:
+            k0, count, d = _span(
+                s, centre, radius, is_cyl, edge_ptr, edge_n, edge_d, corners, ox0, oy0, view,
+                max_range, mg,
+            )  # fmt: skip
+        else:
+            k0, count, d = 0, ncols, -np.inf
+        if count > 0:
+            cand[m], k0s[m], counts[m] = s, k0, count
+            near[m] = d - 1e-9 * (1.0 + abs(d))  # rounding of d must not skip a real hit
+            m += 1
+    order = np.argsort(near[:m])
+    hx, hy = np.full(ncols, np.nan), np.empty(ncols)  # column directions, computed on first use
+    for i in order:
+        s, k0, count = cand[i], k0s[i], counts[i]
+        zl, zh = z_min[s] - oz, z_max[s] - oz
+        level_inside = zl <= 0.0 and zh >= 0.0
+        for j in range(count):
+            c = (k0 + j) % full if cull else j
+            if c >= ncols:
+                continue
+            far = out[0, c]
+            for r in range(1, rings):
+                far = max(far, out[r, c])
+            if near[i] > far:
+                continue
+            if np.isnan(hx[c]):
+                az = az0 + daz * c
+                az += col_psi[c] if moving_psi else heading
+                hx[c], hy[c] = np.cos(az), np.sin(az)
+            ox, oy = (col_xy[c, 0], col_xy[c, 1]) if moving_xy else (ox0, oy0)
+            t_in, t_out = _interval_2d(
+                s, is_cyl, edge_ptr, edge_n, edge_d, cyl, ox, oy, hx[c], hy[c]
+            )
+            if not (t_in <= t_out and t_out >= 0.0 and t_in <= max_range):
+                continue
+            for r in range(rings):
+                # The z slab in horizontal distance: [z_min, z_max] / tan e for a rising beam,
+                # reversed for a falling one; a level beam is all-or-nothing.
+                if tan_e[r] > 0.0:
+                    enter, leave = max(zl * inv[r], t_in), min(zh * inv[r], t_out)
+                elif tan_e[r] < 0.0:
+                    enter, leave = max(zh * inv[r], t_in), min(zl * inv[r], t_out)
+                elif level_inside:
+                    enter, leave = t_in, t_out
+                else:
+                    continue
+                if has_cut[s]:
+                    den = cut[s, 0] * hx[c] + cut[s, 1] * hy[c] + cut[s, 2] * tan_e[r]
+                    num = cut[s, 3] - (cut[s, 0] * ox + cut[s, 1] * oy) - cut[s, 2] * oz
+                    if den < 0:
+                        enter = max(enter, num / den)
+                    elif den > 0:
+                        leave = min(leave, num / den)
+                    elif num < 0:
+                        continue
+                enter, leave = max(enter, 0.0), min(leave, limit[r])
+                if enter <= leave and enter / cos_e[r] < out[r, c]:
+                    out[r, c] = enter / cos_e[r]
+    # A surface closer than the minimum range blocks the beam and returns nothing.
+    for r in range(rings):
+        for c in range(ncols):
+            if out[r, c] <= min_range:
+                out[r, c] = np.inf
+    return out
+
+
+_NO_XY, _NO_PSI = np.zeros((0, 2)), np.zeros(0)
+
+
 def _pairs(
     scene: Scene,
     origin: np.ndarray,
@@ -107,93 +338,23 @@ def _pairs(
     margin: float,
     slack: float,
 ):
-    """(solid, column) pairs whose solid, seen from ``origin``, may cover the column's direction:
-    prisms by the bearings of their corners, cylinders by their circle. ``margin`` [m] is how far
-    the sensor moves during the sweep, ``slack`` [rad] how far its heading turns."""
-    rel = scene.centre - origin
-    dist = np.hypot(rel[:, 0], rel[:, 1])
-    rad = scene.radius + margin
-    cand = np.nonzero(dist - rad < reach)[0]
-    if cand.size == 0:
-        return np.zeros(0, int), np.zeros(0, int)
-    dist, rad, rel = dist[cand], rad[cand], rel[cand]
+    """(solid, column) pairs whose solid, seen from ``origin``, may cover the column's
+    direction (the culling :func:`cast` applies; ``margin`` [m] is how far the sensor moves
+    during the sweep, ``slack`` [rad] how far its heading turns)."""
     full = layout.full_circle
-    inside = dist <= rad
-    half = (
-        np.where(inside, np.pi, np.arcsin(np.clip(rad / np.maximum(dist, 1e-12), 0.0, 1.0))) + slack
+    k0, count = _spans(
+        *(scene.centre, scene.radius, scene.is_cyl, scene.edge_ptr),
+        *(scene.edge_n, scene.edge_d, scene.corners, float(origin[0]), float(origin[1])),
+        (float(heading + layout.az0), float(layout.daz), full),
+        float(reach),
+        (float(margin), float(slack)),
     )
-    centre_angle = np.arctan2(rel[:, 1], rel[:, 0])
-    # Prisms: the exact bearings of their corners bound what they cover (far tighter than the
-    # bounding circle for long walls), widened by what the sweep's motion can change.
-    prism = ~scene.is_cyl[cand]
-    if prism.any():
-        sp = cand[prism]
-        out_by = np.max(np.einsum("pkj,j->pk", scene.edge_n[sp], origin) - scene.edge_d[sp], axis=1)
-        outside = out_by > margin  # a lower bound of the distance to the footprint
-        if outside.any():
-            rc = scene.corners[sp[outside]] - origin
-            mid = centre_angle[prism][outside]
-            bearing = (
-                np.mod(np.arctan2(rc[..., 1], rc[..., 0]) - mid[:, None] + np.pi, TWO_PI) - np.pi
-            )
-            lo_b, hi_b = bearing.min(axis=1), bearing.max(axis=1)
-            widen = np.arcsin(np.clip(margin / out_by[outside], 0.0, 1.0))
-            idx = np.nonzero(prism)[0][outside]
-            centre_angle[idx] = mid + (lo_b + hi_b) / 2
-            half[idx] = (hi_b - lo_b) / 2 + widen + slack
-            inside[idx] = False
-        inside_prism = np.nonzero(prism)[0][~outside]
-        inside[inside_prism] = True
-        half[inside_prism] = np.pi
-    centre_angle = centre_angle - heading - layout.az0
-    step = abs(layout.daz)
-    sign = 1.0 if layout.daz > 0 else -1.0
-    lo = np.mod(sign * centre_angle - half, TWO_PI)  # angular offset from column 0, beam-wise
-    k0 = np.ceil(lo / step - 1e-9).astype(int)
-    count = np.floor((lo + 2 * half) / step + 1e-9).astype(int) - k0 + 1
-    count = np.where(inside | (half >= np.pi), full, np.clip(count, 0, full))
     total = int(count.sum())
-    if total == 0:
-        return np.zeros(0, int), np.zeros(0, int)
-    solid = np.repeat(cand, count)
+    solid = np.repeat(np.arange(len(scene)), count)
     start = np.repeat(np.cumsum(count) - count, count)
     col = (np.repeat(k0, count) + np.arange(total) - start) % full
     keep = col < layout.count
     return solid[keep], col[keep]
-
-
-def _interval_2d(scene: Scene, solid: np.ndarray, o: np.ndarray, h: np.ndarray):
-    """Exact [t_in, t_out] of horizontal distance where the line o + t h is inside the footprint."""
-    # Cylinders carry only padding edges (always satisfied), so the prism clip leaves them
-    # (−inf, inf); their circle then overwrites that. Cheaper than splitting the arrays.
-    t_in, t_out = _interval_prism(scene, solid, o, h)
-    cyl = scene.is_cyl[solid]
-    if cyl.any():
-        s, oc, hc = solid[cyl], o[cyl], h[cyl]
-        fx, fy = oc[:, 0] - scene.cyl[s, 0], oc[:, 1] - scene.cyl[s, 1]
-        b = fx * hc[:, 0] + fy * hc[:, 1]
-        disc = b * b - (fx * fx + fy * fy - scene.cyl[s, 2] ** 2)
-        root = np.sqrt(np.maximum(disc, 0.0))
-        miss = disc < 0
-        t_in[cyl] = np.where(miss, np.inf, -b - root)
-        t_out[cyl] = np.where(miss, -np.inf, -b + root)
-    return t_in, t_out
-
-
-def _interval_prism(scene: Scene, solid: np.ndarray, o: np.ndarray, h: np.ndarray):
-    """Cyrus-Beck clipping of o + t h against each footprint's edge half-planes."""
-    n, d = scene.edge_n[solid], scene.edge_d[solid]
-    nx, ny = n[..., 0], n[..., 1]
-    den = nx * h[:, 0:1] + ny * h[:, 1:2]
-    num = d - nx * o[:, 0:1] - ny * o[:, 1:2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = num / den
-    enter = np.max(t, axis=1, where=den < 0, initial=-np.inf)
-    leave = np.min(t, axis=1, where=den > 0, initial=np.inf)
-    parallel_out = ((den == 0) & (num < 0)).any(axis=1)
-    enter[parallel_out] = np.inf
-    leave[parallel_out] = -np.inf
-    return enter, leave
 
 
 def cast(
@@ -218,91 +379,21 @@ def cast(
     (``column_heading``, C); the culling is widened to cover them. ``cull=False`` tests every
     solid against every column (a reference for tests).
     """
-    tan_e = np.asarray(tan_elevation, float).reshape(-1)
-    cos_e = 1.0 / np.sqrt(1.0 + tan_e**2)
-    rings, cols = len(tan_e), layout.count
-    out = np.full(rings * cols, np.inf)
-    origin_xy = np.asarray(origin_xy, float)
-    margin, slack = 0.0, 0.0
-    if column_origin_xy is not None:
-        margin = float(np.max(np.linalg.norm(column_origin_xy - origin_xy, axis=1)))
-    if column_heading is not None:
-        slack = float(np.max(np.abs(np.mod(column_heading - heading + np.pi, TWO_PI) - np.pi)))
-    t_reach = max_range  # horizontal reach never exceeds the range
-    if cull:
-        solid, col = _pairs(
-            scene, origin_xy, heading, layout, t_reach, margin, slack + abs(layout.daz)
-        )
-    else:
-        solid = np.repeat(np.arange(len(scene)), layout.count)
-        col = np.tile(np.arange(layout.count), len(scene))
-    if solid.size == 0:
-        return out.reshape(rings, cols)
-    az = layout.az0 + layout.daz * col
-    az = az + (heading if column_heading is None else column_heading[col])
-    h = np.column_stack([np.cos(az), np.sin(az)])
-    o = (
-        np.broadcast_to(origin_xy, (len(col), 2))
+    tan_e = np.ascontiguousarray(tan_elevation, dtype=np.float64).reshape(-1)
+    col_xy = (
+        _NO_XY
         if column_origin_xy is None
-        else column_origin_xy[col]
+        else np.ascontiguousarray(column_origin_xy, dtype=np.float64)
     )
-    t_in, t_out = _interval_2d(scene, solid, o, h)
-    hit2d = (t_in <= t_out) & (t_out >= 0.0) & (t_in <= t_reach)
-    solid, col, t_in, t_out, o, h = (
-        solid[hit2d],
-        col[hit2d],
-        t_in[hit2d],
-        t_out[hit2d],
-        o[hit2d],
-        h[hit2d],
+    col_psi = (
+        _NO_PSI if column_heading is None else np.ascontiguousarray(column_heading, np.float64)
     )
-
-    # Per ring: z slab of each solid, expressed in horizontal distance. For a rising beam the
-    # slab is [z_min, z_max] / tan e, for a falling one reversed; level beams are all-or-nothing.
-    zl = scene.z_min[solid] - origin_z
-    zh = scene.z_max[solid] - origin_z
-    flat = tan_e == 0.0
-    up = tan_e > 0.0
-    with np.errstate(divide="ignore"):
-        inv = np.where(flat, 0.0, 1.0 / np.where(flat, 1.0, tan_e))
-    inv_up, inv_down = np.where(up, inv, 0.0), np.where(up | flat, 0.0, inv)
-    enter = np.multiply.outer(zl, inv_up)
-    enter += np.multiply.outer(zh, inv_down)
-    np.maximum(enter, t_in[:, None], out=enter)
-    leave = np.multiply.outer(zh, inv_up)
-    leave += np.multiply.outer(zl, inv_down)
-    np.minimum(leave, t_out[:, None], out=leave)
-    if flat.any():
-        level_inside = (zl <= 0.0) & (zh >= 0.0)
-        enter[:, flat] = np.where(level_inside, t_in, np.inf)[:, None]
-        leave[:, flat] = np.where(level_inside, t_out, -np.inf)[:, None]
-
-    cut = scene.cut[solid]
-    has_cut = np.any(cut[:, :3] != 0.0, axis=1)
-    if has_cut.any():
-        c = cut[has_cut]
-        den = (np.einsum("pj,pj->p", c[:, :2], h[has_cut]))[:, None] + c[:, 2:3] * tan_e[None, :]
-        num = (c[:, 3] - np.einsum("pj,pj->p", c[:, :2], o[has_cut]) - c[:, 2] * origin_z)[:, None]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = num / den
-        enter[has_cut] = np.maximum(enter[has_cut], np.where(den < 0, t, -np.inf))
-        leave[has_cut] = np.minimum(
-            leave[has_cut], np.where(den > 0, t, np.where((den == 0) & (num < 0), -np.inf, np.inf))
-        )
-
-    limit = np.full(rings, max_range) * cos_e
-    if water_level is not None and origin_z > water_level:
-        with np.errstate(divide="ignore"):
-            t_water = np.where(
-                tan_e < 0, (water_level - origin_z) / np.where(tan_e < 0, tan_e, -1.0), np.inf
-            )
-        limit = np.minimum(limit, t_water)
-    np.maximum(enter, 0.0, out=enter)
-    np.minimum(leave, limit[None, :], out=leave)
-    ok = enter <= leave
-    p_idx, r_idx = np.nonzero(ok)
-    if p_idx.size:
-        np.minimum.at(out, r_idx * cols + col[p_idx], enter[p_idx, r_idx] / cos_e[r_idx])
-    # A surface closer than the minimum range blocks the beam and returns nothing.
-    out[out <= min_range] = np.inf
-    return out.reshape(rings, cols)
+    return _cast_kernel(
+        *(scene.centre, scene.radius, scene.is_cyl, scene.edge_ptr, scene.edge_n, scene.edge_d),
+        *(scene.corners, scene.z_min, scene.z_max, scene.cyl, scene.cut, scene.has_cut),
+        *(float(layout.az0), float(layout.daz), int(layout.count), layout.full_circle, tan_e),
+        (float(origin_xy[0]), float(origin_xy[1]), float(origin_z), float(heading)),
+        *(col_xy, col_psi, (float(max_range), float(min_range))),
+        np.nan if water_level is None else float(water_level),
+        bool(cull),
+    )
