@@ -101,9 +101,10 @@ def near_solids(world, centre, reach):
 
 LAYOUTS = {
     "hokuyo": (ColumnLayout(np.deg2rad(-135), np.deg2rad(0.25), 1081), [0.0], 0.5, 60.0, 0.1),
+    # a VLP-16's span at half its columns and rings: the every-pair reference is the slow part
     "vlp16_cw": (
-        ColumnLayout(np.pi, -np.deg2rad(0.4), 900),
-        np.tan(np.deg2rad(np.arange(-15.0, 15.1, 2.0))),
+        ColumnLayout(np.pi, -np.deg2rad(0.8), 450),
+        np.tan(np.deg2rad(np.arange(-15.0, 15.1, 4.0))),
         1.0,
         100.0,
         0.5,
