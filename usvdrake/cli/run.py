@@ -10,6 +10,7 @@ from pathlib import Path
 from usvdrake.cli._format import num
 from usvdrake.diagrams import load_scenario, with_overrides
 from usvdrake.errors import ConfigError
+from usvdrake.logs.mission_log.live import FoxgloveLive
 from usvdrake.run.fleet import fleet_summary
 from usvdrake.run.interrupt import stop_reason, stop_signal
 from usvdrake.run.mission import run_mission
@@ -108,6 +109,16 @@ def add_arguments(r) -> None:
         "--port", type=int, default=None, help="Meshcat port (default: first free from 7000)"
     )
     r.add_argument(
+        "--foxglove",
+        type=int,
+        nargs="?",
+        const=8765,
+        default=None,
+        metavar="PORT",
+        help="stream the run to Foxglove (WebSocket on localhost:PORT, default 8765) and pace "
+        "it in real time",
+    )
+    r.add_argument(
         "--realtime-rate", type=float, default=None, help="0: as fast as possible; 1: real time"
     )
     r.add_argument(
@@ -147,7 +158,18 @@ def run(args) -> int:
         print(
             f"Meshcat (localhost only): {meshcat.web_url()}  — open it in a browser to watch live"
         )
-    rate = args.realtime_rate if args.realtime_rate is not None else (1.0 if args.meshcat else 0.0)
+    live = None
+    if args.foxglove is not None:
+        if scenario.controller == "taxi":
+            raise ConfigError("command line", "--foxglove", "a single-vessel scenario", "a fleet")
+        try:
+            live = FoxgloveLive(args.foxglove)
+        except RuntimeError as e:  # the SDK's error when the port is taken
+            got = f"{args.foxglove} ({e})"
+            raise ConfigError("command line", "--foxglove", "a free port", got) from None
+        print(f"Foxglove (localhost only): {live.url}  — in Foxglove: Open connection, that URL")
+    watched = args.meshcat or live is not None
+    rate = args.realtime_rate if args.realtime_rate is not None else (1.0 if watched else 0.0)
 
     def mission():
         return run_mission(
@@ -157,9 +179,14 @@ def run(args) -> int:
             record=not args.no_replay,
             progress=not args.quiet,
             realtime_rate=rate,
+            live=live,
         )
 
-    result = _profiled(Path(args.out), mission) if args.profile else mission()
+    try:
+        result = _profiled(Path(args.out), mission) if args.profile else mission()
+    finally:
+        if live is not None:
+            live.close()
     if scenario.controller == "taxi":
         print(fleet_summary(result.metrics, args.out))
     else:

@@ -35,13 +35,16 @@ def run_mission(
     record: bool = True,
     progress: bool = False,
     realtime_rate: float = 0.0,
+    live=None,
 ) -> MissionResult:
     """Simulate ``scenario`` until its mission completes or ``scenario.duration`` elapses.
 
     ``meshcat``: draw into this Meshcat (live); if None and ``record`` is set, a private
     localhost Meshcat is made just for the HTML replay. ``out_dir``: write ``metrics.json``,
     ``replay.html``, ``report.html`` and ``ground_truth.tum`` there. ``realtime_rate``: 0 runs as
-    fast as possible, 1.0 paces the simulation to the wall clock (for watching live).
+    fast as possible, 1.0 paces the simulation to the wall clock (for watching live). ``live``: a
+    :class:`~usvdrake.logs.mission_log.live.FoxgloveLive` that streams the log as it is written
+    (needs ``out_dir``).
 
     A fleet scenario (controller ``taxi``) runs :func:`usvdrake.run.fleet.run_fleet_mission`: its
     result has the service metrics and one track per boat (``tracks``) instead of ``states``.
@@ -66,7 +69,7 @@ def run_mission(
     if out_dir is not None:
         Path(out_dir).mkdir(parents=True, exist_ok=True)
         # written while the simulation runs (flushed every 0.5 s): a crash keeps all but ~1 s
-        log_writer = MissionLogWriter(Path(out_dir) / "log.mcap")
+        log_writer = MissionLogWriter(Path(out_dir) / "log.mcap", live=live)
         write_scenario(log_writer, scenario_yaml(scenario))
         add_mission_recorder(
             builder,

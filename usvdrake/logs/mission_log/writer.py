@@ -112,8 +112,12 @@ class MissionLogWriter:
     background thread covers quiet periods). ``close()`` (or ``with``) writes the summary and
     footer; until then the file is readable by :func:`read_mission_log` as far as it got."""
 
-    def __init__(self, path: str | Path, flush_period: float = 0.5, profile: str = "usvdrake"):
+    def __init__(
+        self, path: str | Path, flush_period: float = 0.5, profile: str = "usvdrake", live=None
+    ):
         self.path = Path(path)
+        # a FoxgloveLive (usvdrake.logs.mission_log.live) also streaming every message, or None
+        self._live = live
         self.flush_period = float(flush_period)
         self._file = _TailKeepingFile(self.path)
         self._writer = Writer(self._file, use_chunking=False)
@@ -144,6 +148,8 @@ class MissionLogWriter:
                     )
                     ch = self._writer.register_channel(topic, message_encoding, schema_id)
                     self._channels[topic] = ch
+                    if self._live is not None:
+                        self._live.add_channel(ch, topic, schema, message_encoding)
                     self._dirty = True
         return ch
 
@@ -166,6 +172,8 @@ class MissionLogWriter:
             if self._closed:
                 raise ValueError(f"{self.path}: the mission log is closed")
             self._writer.add_message(channel_id=channel, log_time=ns, data=data, publish_time=pub)
+            if self._live is not None:
+                self._live.log(channel, ns, data)
             self._dirty = True
             self._max_log = max(self._max_log, t)
             now = time.monotonic()
