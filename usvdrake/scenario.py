@@ -31,6 +31,7 @@ from usvdrake.sensors.imu_model import ImuConfig
 from usvdrake.sensors.lidar_model import LIDAR_PRESETS, LidarConfig
 from usvdrake.sensors.pose_sensor import PoseSensorConfig
 from usvdrake.sensors.thrust_sensor import ThrustSensorConfig
+from usvdrake.systems.colav.situation import resolve_situation
 from usvdrake.systems.control.nmpc_problem import NmpcConfig
 from usvdrake.systems.control.pd_controller import PdControllerConfig
 from usvdrake.systems.control.reference_model import ReferenceModelConfig
@@ -209,6 +210,20 @@ class HardwareConfig:
 
 
 @dataclass
+class TrafficConfig:
+    """Target ships from a DNV trafficgen traffic situation (issue 37): the situation's own-ship
+    start is placed at the scenario's initial pose, the targets keep their place and course
+    relative to it (``colav.scaling.placed``; Froude-scaled first when the situation's own ship
+    is not the vessel's length). They sail their waypoints through the world (land is not
+    checked), send AIS reports, and the vessel's AIS tracker outputs them as ``tracks``."""
+
+    # a situation JSON file or a shipped name (traffic_situation_01, canal_situation_01);
+    # empty: no traffic
+    situation: str = ""
+    ais_period: float = 1.0  # [s] AIS report and tracker period
+
+
+@dataclass
 class Scenario:
     name: str = ""  # short identifier (defaults to the file name)
     description: str = ""  # one line for humans
@@ -242,6 +257,8 @@ class Scenario:
     hardware: HardwareConfig = field(default_factory=HardwareConfig)
     # controller "taxi": the boats, ride requests and taxi settings of a fleet mission
     fleet: FleetConfig = field(default_factory=FleetConfig)
+    # target ships of a traffic situation met on the way (none by default)
+    traffic: TrafficConfig = field(default_factory=TrafficConfig)
 
 
 def check_numbers(s: Scenario, file: str | Path = "scenario") -> None:
@@ -304,6 +321,8 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
         raise ConfigError(
             file, "vessel", "one of " + ", ".join(available_vessels()), repr(s.vessel)
         )
+    if s.traffic.situation:
+        resolve_situation(s.traffic.situation, file, "traffic.situation")
     if s.world not in available_worlds():
         raise ConfigError(file, "world", "one of " + ", ".join(available_worlds()), repr(s.world))
     if len(s.initial_state) != 6:

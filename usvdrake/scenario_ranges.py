@@ -53,6 +53,7 @@ RANGES: dict[str, tuple] = {
     "nmhe.angle_variance": (0.0, 1e12, "(]"),
     "nmhe.arrival_variance": (0.0, 1e12, "(]"),
     "mission.speed": (0.0, 20.0),
+    "traffic.ais_period": (0.01, 3600.0),  # [s]
     "mission.acceptance_radius": (0.0, 1e4, "(]"),
     "mission.slowdown_radius": (0.0, 1e4, "(]"),
     "control.lookahead": (0.0, 1e4, "(]"),

@@ -12,13 +12,18 @@ def add_arguments(p) -> None:
     p.add_argument(
         "situation",
         help="a trafficgen traffic-situation JSON file, or a shipped one's name "
-        "(traffic_situation_01 ... _40: DNV's standard set)",
+        "(traffic_situation_01 ... _40: DNV's standard set; canal_situation_01 ... _25: the "
+        "canal-scale set)",
     )
     p.add_argument("--out", default="out/encounter", help="output folder (default: out/encounter)")
     add_config_arguments(p)
     p.add_argument(
         "--duration", type=float, default=None, help="simulated time limit [s] (default: 2.5 × "
         "the route's planned time + 600 s)"
+    )  # fmt: skip
+    p.add_argument(
+        "--replay", action="store_true",
+        help="also write DIR/replay.html: a Meshcat replay with every ship to scale",
     )  # fmt: skip
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -27,7 +32,8 @@ def add_config_arguments(p) -> None:
     """The options ``encounter`` and ``encounters`` share."""
     p.add_argument(
         "--safety-distance", type=float, default=0.5 * NMI,
-        help="required CPA [m] at ship scale (default: 926, 0.5 nmi; × k for a scaled vessel)",
+        help="required CPA [m] for DNV's 122 m own ship (default: 926, 0.5 nmi); × L / 122 m "
+        "for a smaller own ship or vessel (canal set, roboat2: 15.2 m)",
     )  # fmt: skip
     p.add_argument("--seed", type=int, default=0, help="AIS noise seed (default: 0)")
     p.add_argument(
@@ -57,6 +63,7 @@ def run(args) -> int:
         args.duration,
         progress=not args.quiet,
         own=args.own,
+        replay=args.replay,
     )
     e = r["evaluation"]
     print(

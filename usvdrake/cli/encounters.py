@@ -6,13 +6,14 @@ from pathlib import Path
 from usvdrake.cli._format import num, table
 from usvdrake.cli.encounter import add_config_arguments, config_from
 from usvdrake.errors import ConfigError
-from usvdrake.run.encounter import STANDARD, run_encounters
+from usvdrake.run.encounter import CANAL, STANDARD, run_encounters
 
 
 def add_arguments(p) -> None:
     p.add_argument(
         "paths", nargs="*", default=[STANDARD],
-        help=f"situation files or folders, or '{STANDARD}' (default: the 40 shipped situations)",
+        help=f"situation files or folders, '{STANDARD}' (default: DNV's 40 shipped situations) "
+        f"or '{CANAL}' (the 25 canal-scale ones for Roboat II)",
     )  # fmt: skip
     p.add_argument("--out", default="out/encounters", help="output folder")
     p.add_argument("--workers", type=int, default=2, help="local Dask workers (default: 2)")
@@ -45,7 +46,10 @@ def run(args) -> int:
         not args.quiet,
         own=args.own,
     )
-    rows = {e["situation"].removeprefix("traffic_situation_"): _row(e) for e in s["entries"]}
+    rows = {
+        e["situation"].removeprefix("traffic_situation_").removeprefix("canal_situation_"): _row(e)
+        for e in s["entries"]
+    }
     print("\n".join(table(rows)))
     for f in s["failed"]:
         print(f"  {f['situation']}: FAILED {f['error']}")

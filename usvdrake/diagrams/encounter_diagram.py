@@ -28,6 +28,7 @@ from usvdrake.systems.colav.ais_transponders import AisTransponders
 from usvdrake.systems.colav.route_guidance import RouteGuidance
 from usvdrake.systems.colav.sbmpc import NMI, SbmpcParams
 from usvdrake.systems.colav.sbmpc_colav import SbmpcColav
+from usvdrake.systems.colav.scaling import froude_scaled, placed
 from usvdrake.systems.colav.ship_autopilot import ShipAutopilot
 from usvdrake.systems.colav.ship_model import (
     ShipParams,
@@ -35,7 +36,12 @@ from usvdrake.systems.colav.ship_model import (
     response_time_constants,
 )
 from usvdrake.systems.colav.ship_plant import ShipPlant
-from usvdrake.systems.colav.situation import TrafficSituation
+from usvdrake.systems.colav.situation import (
+    REFERENCE_LENGTH_M,
+    TrafficSituation,
+    load_situation,
+    resolve_situation,
+)
 from usvdrake.systems.colav.target_ships import TargetShips
 from usvdrake.systems.control.heading_speed_controller import HeadingSpeedController
 from usvdrake.systems.guidance.line_of_sight import ControlConfig
@@ -67,6 +73,8 @@ class EncounterConfig:
     max_return_deg: float | None = None
     arrival_radius_m: float = 150.0  # the route is done this close to its end (evaluation: 200)
     length_scale: float = 1.0  # k of a Froude-scaled situation (1: the situation as written)
+    # SB-MPC roles from DNV's sectors, as the evaluation classifies (``SbmpcParams.sector_roles``)
+    sector_roles: bool = False
 
     def froude_scaled(self, k: float) -> "EncounterConfig":
         """Distances × k, times × √k (``scaling.froude_scaled``); AIS sampling unchanged (the
@@ -214,7 +222,7 @@ def build_encounter_diagram(
     colav = b.AddNamedSystem(
         "sbmpc_colav",
         SbmpcColav(
-            sbmpc or params,
+            sbmpc or dataclasses.replace(params, sector_roles=cfg.sector_roles),
             cfg.colav_period_s,
             None if cfg.max_return_deg is None else np.radians(cfg.max_return_deg),
         ),
@@ -247,3 +255,38 @@ def route_time(situation: TrafficSituation) -> float:
     own = situation.own_ship
     legs = np.linalg.norm(np.diff(own.xy, axis=0), axis=1)
     return float(np.sum(legs / np.maximum(own.leg_speeds[: len(legs)], 1e-3)))
+
+
+# ------------------------------------------------------------------ traffic in a mission
+
+
+def mission_traffic(name: str, vessel: VesselParams, initial_state) -> TrafficSituation:
+    """A scenario's ``traffic.situation`` in its world: Froude-scaled to the vessel's hull when
+    its own ship has another length (``scaling.froude_scaled``), then placed so that its own
+    ship starts at the scenario's initial pose [x y ψ] (``scaling.placed``)."""
+    situation = load_situation(resolve_situation(name))
+    k = vessel.hull.length / situation.own_ship.length
+    if abs(k - 1.0) > 1e-9:
+        situation = froude_scaled(situation, k, vessel.hull.length, vessel.hull.beam)
+    x0, y0, psi0 = (float(v) for v in initial_state[:3])
+    return placed(situation, x0, y0, psi0)
+
+
+def add_traffic(b, situation: TrafficSituation, length: float, seed: int, ais_period: float):
+    """Target ships (world side: their true states and AIS transponders) and the AIS tracker
+    (autonomy side) into builder ``b``; exports ``target_states`` (truth, for the metrics and
+    drawing), ``tracks`` (a list of ``tracking.Track``) and ``track_states``. AIS noise at the
+    own ship's scale: ``EncounterConfig.ais_noise`` with k = length / 122 m."""
+    noise = EncounterConfig(length_scale=length / REFERENCE_LENGTH_M).ais_noise()
+    targets = b.AddNamedSystem("traffic", TargetShips(situation.targets))
+    ais = b.AddNamedSystem(
+        "ais_transponders", AisTransponders(targets.ids, seed, noise, ais_period)
+    )
+    tracker = b.AddNamedSystem(
+        "ais_tracker", AisTrackerSystem(len(situation.targets), noise, ais_period)
+    )
+    b.Connect(targets.GetOutputPort("target_states"), ais.GetInputPort("target_states"))
+    b.Connect(ais.GetOutputPort("ais_reports"), tracker.GetInputPort("ais_reports"))
+    b.ExportOutput(targets.GetOutputPort("target_states"), "target_states")
+    b.ExportOutput(tracker.GetOutputPort("tracks"), "tracks")
+    b.ExportOutput(tracker.GetOutputPort("track_states"), "track_states")

@@ -5,6 +5,7 @@ from pydrake.geometry import Meshcat
 from pydrake.systems.framework import Diagram, DiagramBuilder
 
 from usvdrake.diagrams.autonomy import make_autonomy
+from usvdrake.diagrams.encounter_diagram import add_traffic, mission_traffic
 from usvdrake.diagrams.hardware_station import make_hardware_station
 from usvdrake.diagrams.station import make_sim_station
 from usvdrake.scenario import Scenario
@@ -99,6 +100,11 @@ def build_vessel_diagram(
     for i in range(autonomy.num_output_ports()):
         name = autonomy.get_output_port(i).get_name()
         builder.ExportOutput(autonomy.get_output_port(i), name)
+    if scenario.traffic.situation:  # target ships, their AIS and our tracker (issue 37)
+        traffic = mission_traffic(scenario.traffic.situation, vessel, scenario.initial_state)
+        add_traffic(
+            builder, traffic, vessel.hull.length, scenario.seed, scenario.traffic.ais_period
+        )
 
     if meshcat is not None:
         # the drawn pose: the truth in simulation, the estimate on the water

@@ -34,7 +34,7 @@ from usvdrake.diagrams.encounter_diagram import (
 )
 from usvdrake.errors import ConfigError
 from usvdrake.run.campaign import dask_client
-from usvdrake.run.simulate import simulate
+from usvdrake.run.simulate import make_meshcat, simulate
 from usvdrake.scenario import SimulationConfig
 from usvdrake.systems.colav.evaluation import (
     ColregParams,
@@ -47,17 +47,23 @@ from usvdrake.systems.colav.evaluation import (
 from usvdrake.systems.colav.sbmpc import NMI
 from usvdrake.systems.colav.scaling import froude_scaled
 from usvdrake.systems.colav.situation import (
+    CANAL_DIR,
     DATA_DIR,
+    REFERENCE_LENGTH_M,
     TrafficSituation,
     load_encounter_settings,
     load_situation,
+    resolve_situation,
+    settings_path_for,
     situation_files,
 )
 from usvdrake.vessel import load_vessel
 from usvdrake.viz.encounter_plot import plot_encounter
+from usvdrake.viz.encounter_replay import encounter_replay_html
 
 LOG_PERIOD_S = 1.0
 STANDARD = "standard"  # the keyword for DNV's standard encounter set shipped in the package
+CANAL = "canal"  # the keyword for the canal-scale set (Roboat II, trafficgen, data/canal/)
 # Error-controlled RK3 as the missions use; steps up to 1 s (the autopilot's sample period).
 INTEGRATION = SimulationConfig(integrator="runge_kutta3", accuracy=1e-4, max_step=1.0)
 
@@ -83,10 +89,16 @@ def colreg_params(config: EncounterConfig) -> ColregParams:
 
 
 def prepare(situation_path, own: str = SHIP, config: EncounterConfig | None = None):
-    """(situation, config) for ``own``: as written for the ship; Froude-scaled to the vessel's
-    hull length for a usvdrake vessel (``scaling.froude_scaled``), the config with it."""
+    """(situation, config) for ``own``. ``config`` is given at ship scale (DNV's 122 m own ship,
+    ``REFERENCE_LENGTH_M``); a situation written for a smaller own ship (the canal set's 2 m
+    Roboat II) gets it Froude-scaled to that length (safety distance 0.5 nmi × L / 122 m, the
+    same 7.6 own-ship lengths). For a usvdrake vessel the situation is then Froude-scaled to the
+    vessel's hull length (``scaling.froude_scaled``), the config with it."""
     situation = load_situation(situation_path)
     cfg = config or EncounterConfig()
+    k0 = situation.own_ship.length / REFERENCE_LENGTH_M
+    if abs(k0 - 1.0) > 1e-9:
+        cfg = cfg.froude_scaled(k0)
     if own == SHIP:
         return situation, cfg
     hull = load_vessel(own).hull
@@ -94,16 +106,28 @@ def prepare(situation_path, own: str = SHIP, config: EncounterConfig | None = No
     return froude_scaled(situation, k, hull.length, hull.beam), cfg.froude_scaled(k)
 
 
+def shipped_situation(name) -> Path | None:
+    """The shipped situation file of a bare name (``traffic_situation_01``,
+    ``canal_situation_01``), or None."""
+    if Path(str(name)).name != str(name) or Path(str(name)).exists():
+        return None
+    try:
+        return resolve_situation(str(name))
+    except ConfigError:
+        return None
+
+
 def situation_paths(items) -> list[Path]:
     """Situation files from files, folders (their ``*.json`` but ``encounter_settings.json``),
-    the keyword ``standard`` (the 40 shipped ones) or a shipped situation's name
-    (``traffic_situation_01``); none given means ``standard``."""
+    the keywords ``standard`` (DNV's 40) and ``canal`` (the canal-scale set) or a shipped
+    situation's name (``traffic_situation_01``, ``canal_situation_01``); none means
+    ``standard``."""
     items = list(items) or [STANDARD]
     paths: list[Path] = []
     for item in items:
-        p = DATA_DIR if str(item) == STANDARD else Path(item)
-        shipped = DATA_DIR / f"{item}.json"
-        if not p.exists() and Path(str(item)).name == str(item) and shipped.is_file():
+        p = {STANDARD: DATA_DIR, CANAL: CANAL_DIR}.get(str(item), Path(item))
+        shipped = shipped_situation(item)
+        if not p.exists() and shipped is not None:
             p = shipped  # a bare name: one of the shipped situations
         if p.is_dir():
             found = situation_files(p)
@@ -114,7 +138,10 @@ def situation_paths(items) -> list[Path]:
             paths.append(p)
         else:
             raise ConfigError(
-                p, "", "a situation file, a folder, 'standard' or a shipped name", "no such path"
+                p,
+                "",
+                "a situation file, a folder, 'standard', 'canal' or a shipped name",
+                "no such path",
             )
     return paths
 
@@ -158,6 +185,7 @@ def run_encounter(
     plot: bool = True,
     progress: bool = False,
     own: str = SHIP,
+    replay: bool = False,
 ) -> dict:
     """Simulate one traffic situation until the own ship arrives or ``duration`` (default
     :func:`default_duration`) elapses, evaluate it, and write its files to ``out_dir`` (if
@@ -165,9 +193,10 @@ def run_encounter(
     it, :func:`prepare`; ``config`` stays at ship scale). Returns ``evaluation`` (a
     SituationEvaluation), ``sim_time_s``, ``wall_s``, ``done`` (arrived before the time limit),
     ``decide_ms`` (every SB-MPC decision's time), ``decisions``, ``own``, ``length_scale``,
-    ``safety_distance_m`` (at the run's scale) and ``files``."""
+    ``safety_distance_m`` (at the run's scale) and ``files``. ``replay``: also write
+    ``replay.html``, a Meshcat replay with every ship to scale (``viz.encounter_replay``)."""
     situation, cfg = prepare(situation_path, own, config)
-    settings = load_encounter_settings()
+    settings = load_encounter_settings(settings_path_for(situation_path))
     name = Path(situation_path).stem
     limit = default_duration(situation, cfg) if duration is None else float(duration)
     if not limit > 0.0:
@@ -220,6 +249,13 @@ def run_encounter(
                 mark_every_s=180.0 * np.sqrt(cfg.length_scale),  # 3 min at ship scale
             )
             result["files"]["encounter.png"] = png
+        if replay:
+            html = encounter_replay_html(
+                make_meshcat(announce=False), situation, own_track, targets,
+                cfg.safety_distance_m,
+            )  # fmt: skip
+            (out / "replay.html").write_text(html)
+            result["files"]["replay.html"] = out / "replay.html"
     return result
 
 

@@ -23,6 +23,7 @@ from usvdrake.logs.mission_log import read_mission_log
 from usvdrake.logs.mission_log.recorder import RecordedPort
 from usvdrake.logs.run_summary import read_run_summary
 from usvdrake.scenario import Scenario
+from usvdrake.systems.colav.evaluation import traffic_metrics
 from usvdrake.systems.slam.slam_summary import Slam2DSummary, Slam3DSummary
 from usvdrake.vessel import VesselParams, load_vessel
 from usvdrake.worlds import make_world
@@ -39,6 +40,7 @@ SIGNALS = {
     "estimate_time": "/estimate_time",
     "slam_pose": "/slam_pose",
     "explorer_status": "/explorer_status",
+    "target_states": "/target_states",  # traffic (scenario ``traffic``): [x y ψ speed] each
 }
 REQUIRED = ("ground_truth_state", "reference", "thrust_applied", "state_estimate")
 
@@ -64,7 +66,7 @@ def recorded_signal_ports(vessel) -> list[RecordedPort]:
     """The :data:`SIGNALS` the mission log does not record by default, as recorder ports (so
     that a replay has every signal the metrics read)."""
     extra = []
-    for port in ("nmhe_solve_ms", "estimate_time", "explorer_status"):
+    for port in ("nmhe_solve_ms", "estimate_time", "explorer_status", "target_states"):
         if vessel.HasOutputPort(port):
             n = vessel.GetOutputPort(port).size()
             names = tuple(f"v{i}" for i in range(n))
@@ -166,6 +168,8 @@ def measure_mission(
         metrics.update(slam_metrics(times, states, values("slam_pose"), summary))
     elif isinstance(summary, Slam3DSummary):
         metrics.update(slam3d_metrics(times, states, values("slam_pose"), summary))
+    if "target_states" in signals:  # traffic: how near the vessel came to the target ships
+        metrics.update(traffic_metrics(times, states, signals["target_states"].values))
     if "explorer_status" in finals:
         metrics.update(
             _exploration_summary(scenario, vessel, world, finals, signals, states, clearance)

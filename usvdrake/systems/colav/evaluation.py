@@ -513,6 +513,27 @@ def summarize(evaluations) -> dict:
 TRACK_HEADER = ("t_s", "lat_deg", "lon_deg", "heading_deg", "sog_kn")
 
 
+def traffic_metrics(times, own_states, target_states) -> dict:
+    """A mission's traffic metrics from samples at the same times: ``own_states`` (n × ≥ 2, x y
+    first) and ``target_states`` (n × 4 m, [x y ψ speed] per target): the smallest
+    centre-to-centre distance to any target [m], when [s] and to which target (index)."""
+    own = np.asarray(own_states, float)
+    tgt = np.asarray(target_states, float)
+    m = tgt.shape[1] // 4 if tgt.ndim == 2 else 0
+    n = min(len(own), len(tgt))
+    if m == 0 or n == 0:
+        return {"traffic_targets": m, "traffic_min_distance_m": None}
+    xy = tgt[:n].reshape(n, m, 4)[:, :, :2]
+    d = np.linalg.norm(xy - own[:n, None, :2], axis=2)
+    k, j = np.unravel_index(int(np.argmin(d)), d.shape)
+    return {
+        "traffic_targets": m,
+        "traffic_min_distance_m": float(d[k, j]),
+        "traffic_min_distance_t_s": float(np.asarray(times, float)[k]),
+        "traffic_nearest_target": int(j),
+    }
+
+
 def write_track_csv(path, t, lat, lon, heading_deg, sog_kn) -> Path:
     """The own ship's ``track.csv``: ``t_s,lat_deg,lon_deg,heading_deg,sog_kn`` (true heading in
     degrees clockwise from north, as DNV's files; t from the situation's start)."""

@@ -53,6 +53,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from usvdrake.angles import wrap_angle
+from usvdrake.systems.colav.encounter import EncounterType, classify_bearings, relative_bearings
+from usvdrake.systems.colav.situation import EncounterSettings
 
 NMI = 1852.0  # [m]
 
@@ -103,6 +105,10 @@ class SbmpcParams:
     phi_ho_deg: float = 22.5  # head-on: courses opposite within this angle
     phi_cr_deg: float = 68.5  # crossing: courses differ by more than this
     min_target_speed: float = 0.25  # [m/s] slower targets are treated as stationary (no role)
+    # roles from DNV's trafficgen sectors (``encounter.classify_bearings``, the evaluation's
+    # classification) instead of the paper's angles: a target crossing at a shallow angle from
+    # starboard is then a give-way crossing, not a ship overtaking us (our option)
+    sector_roles: bool = False
 
     @classmethod
     def for_safety_distance(
@@ -164,9 +170,35 @@ def predict_own(params, position, course, speed, course_ref, speed_ref):
     return pos + np.asarray(position, dtype=float), vel, chi, t
 
 
+def classify_sectors(own_velocity, rel_position, target_velocity, min_speed: float):
+    """The roles of :func:`classify` from DNV's trafficgen sectors (``encounter``): HO → head-on,
+    CR-GW → give-way crossing, CR-SO → stand-on crossing, OT-SO → stand-on (being overtaken);
+    OT-GW (we overtake: keep out of the way on either side) and no risk → no role."""
+    v0 = np.asarray(own_velocity, dtype=float)
+    rel = np.asarray(rel_position, dtype=float).reshape(-1, 2)
+    tv = np.asarray(target_velocity, dtype=float).reshape(-1, 2)
+    out = np.zeros((4, rel.shape[0]), bool)
+    settings = EncounterSettings()  # DNV's angles (trafficgen's encounter_settings.json)
+    psi0 = float(np.arctan2(v0[1], v0[0]))
+    for i in range(rel.shape[0]):
+        if np.linalg.norm(tv[i]) <= min_speed:
+            continue
+        beta, alpha = relative_bearings((0.0, 0.0), psi0, rel[i], np.arctan2(tv[i, 1], tv[i, 0]))
+        kind = classify_bearings(beta, alpha, settings)
+        out[0, i] = kind is EncounterType.HEAD_ON
+        out[1, i] = kind is EncounterType.CROSSING_GIVE_WAY
+        out[3, i] = kind is EncounterType.CROSSING_STAND_ON
+        out[2, i] = out[3, i] or kind is EncounterType.OVERTAKING_STAND_ON
+    return out[0], out[1], out[2], out[3]
+
+
 def classify(params, own_velocity, rel_position, target_velocity):
-    """Situation at t0 per target (Johansen et al. 2016 §III angles): (head_on, give_way_crossing,
-    stand_on, stand_on_crossing) boolean arrays of shape (M,). rel_position = target − own."""
+    """Situation at t0 per target (Johansen et al. 2016 §III angles, or with ``sector_roles``
+    DNV's sectors, :func:`classify_sectors`): (head_on, give_way_crossing, stand_on,
+    stand_on_crossing) boolean arrays of shape (M,). rel_position = target − own."""
+    if params.sector_roles:
+        return classify_sectors(own_velocity, rel_position, target_velocity,
+                                params.min_target_speed)  # fmt: skip
     c = np.cos
     v0 = np.asarray(own_velocity, dtype=float)
     s0 = np.linalg.norm(v0)

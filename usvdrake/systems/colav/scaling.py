@@ -50,3 +50,24 @@ def froude_scaled(
         targets=tuple(_scaled_ship(s, situation, k) for s in situation.targets),
         description=f"{situation.description} [Froude-scaled, k = {k:.4g}]".lstrip(),
     )
+
+
+def _placed_ship(ship: Ship, rotation: np.ndarray, offset: np.ndarray, turn: float) -> Ship:
+    heading = float(np.mod(ship.heading_deg - np.degrees(turn), 360.0))
+    return dataclasses.replace(ship, xy=ship.xy @ rotation.T + offset, heading_deg=heading)
+
+
+def placed(situation: TrafficSituation, x0: float, y0: float, psi0: float) -> TrafficSituation:
+    """The situation moved rigidly into a world frame: the own ship's start (the local origin)
+    goes to (x0, y0) [m] and its initial heading to ψ0 [rad], every target keeping its place
+    and course relative to the own ship. The ships' ``xy`` and ``heading_deg`` are then world
+    ones; their ``lat``/``lon`` stay those of the file (geodesy does not apply to a world)."""
+    turn = float(psi0 - situation.own_ship.psi0)  # counter-clockwise
+    c, s = np.cos(turn), np.sin(turn)
+    rotation = np.array([[c, -s], [s, c]])
+    offset = np.array([x0, y0], float)
+    return dataclasses.replace(
+        situation,
+        own_ship=_placed_ship(situation.own_ship, rotation, offset, turn),
+        targets=tuple(_placed_ship(t, rotation, offset, turn) for t in situation.targets),
+    )

@@ -28,6 +28,9 @@ KNOT = 1852.0 / 3600.0  # [m/s] per knot (international nautical mile)
 NAUTICAL_MILE = 1852.0  # [m]
 DATA_DIR = Path(__file__).resolve().parent / "data"
 DEFAULT_SETTINGS_PATH = DATA_DIR / "encounter_settings.json"
+CANAL_DIR = DATA_DIR / "canal"  # the canal-scale set: Roboat II among canal boats (README.md)
+# The own ship of DNV's standard set (BASTO VI, 122 m): the scale the encounter defaults are for.
+REFERENCE_LENGTH_M = 122.0
 
 
 def knots_to_mps(v):
@@ -349,6 +352,27 @@ def situation_files(directory: Path | str) -> list[Path]:
     """The situation files of a folder (``*.json`` except ``encounter_settings.json``), sorted."""
     d = Path(directory)
     return sorted(p for p in d.glob("*.json") if p.name != "encounter_settings.json")
+
+
+def resolve_situation(name: str, file="scenario", key="traffic.situation") -> Path:
+    """A situation file from a path or a shipped situation's bare name (``traffic_situation_01``
+    of DNV's set, ``canal_situation_01`` of the canal set); :class:`ConfigError` otherwise."""
+    path = Path(name)
+    if path.is_file():
+        return path
+    if path.name == str(name):
+        for folder in (DATA_DIR, CANAL_DIR):
+            if (folder / f"{name}.json").is_file():
+                return folder / f"{name}.json"
+    raise ConfigError(file, key, "a traffic-situation JSON file or a shipped situation's name",
+                      repr(name))  # fmt: skip
+
+
+def settings_path_for(situation_path: Path | str) -> Path:
+    """The ``encounter_settings.json`` beside a situation file (the settings it was generated
+    with), else the standard set's."""
+    beside = Path(situation_path).parent / "encounter_settings.json"
+    return beside if beside.is_file() else DEFAULT_SETTINGS_PATH
 
 
 def load_encounter_settings(path: Path | str | None = None) -> EncounterSettings:
