@@ -23,23 +23,26 @@ from pathlib import Path
 import numpy as np
 
 from usvdrake.diagrams import load_scenario, with_overrides
-from usvdrake.run.slam3d import run_slam3d, settings_from_scenario
+from usvdrake.diagrams.slam import settings_from_scenario
+from usvdrake.run.mission import run_mission
+from usvdrake.run.slam3d import run_slam3d
 
 
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--duration", type=float, default=120.0, help="[s] of canal_survey")
     parser.add_argument("--log", help="an existing mission log instead of recording one")
+    parser.add_argument("--save-log", help="directory to keep the recorded log in (for --log)")
     args = parser.parse_args()
     scenario = with_overrides(load_scenario("canal_survey"), duration=args.duration)
     config, mount, datum = settings_from_scenario(scenario)
     with tempfile.TemporaryDirectory() as tmp:
         log = Path(args.log) if args.log else None
         if log is None:
-            from usvdrake.run.mission import run_mission
-
-            run_mission(scenario, out_dir=tmp, record=False)
-            log = Path(tmp) / "log.mcap"
+            out = Path(args.save_log) if args.save_log else Path(tmp)
+            out.mkdir(parents=True, exist_ok=True)
+            run_mission(scenario, out_dir=out, record=False)
+            log = out / "log.mcap"
         result = run_slam3d(log, config, mount=mount, datum=datum)
     m = result.metrics
     timings = np.array([[t.registration, t.update, t.loop] for t in result.slam.graph.timings])

@@ -5,6 +5,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
 
 from usvdrake.sensors.lidar3d import range_image_to_cloud
 from usvdrake.sensors.messages import PointCloud
@@ -19,12 +21,15 @@ from usvdrake.systems.slam.lidar_features import (
 )
 from usvdrake.systems.slam.scan_registration3d import (
     RegistrationParams,
+    _Neighbourhoods,
     _settled,
     build_feature_map,
+    deskew,
     fit_neighbourhoods,
     register_scan,
     retract,
 )
+from usvdrake.systems.slam.voxel_map import VoxelMap
 
 DATA = Path(__file__).parent / "data" / "lidar3d"
 VLP16_ELEVATIONS = np.deg2rad(np.arange(-15.0, 15.1, 2.0))
@@ -265,8 +270,6 @@ def test_real_pair_small_gicp(real_result):
 def test_neighbourhood_fits_match_lapack_eigh():
     """The numba kernel's closed-form fits against numpy's eigh: plane normal = smallest
     eigenvector, line normals ⊥ the largest one; kept exactly where the tests say so."""
-    from scipy.spatial import cKDTree
-
     rng = np.random.default_rng(3)
     # planes (thin slabs), lines (thin rods) and blobs, at random orientations
     pts = []
@@ -276,14 +279,15 @@ def test_neighbourhood_fits_match_lapack_eigh():
         pts.append(rng.normal(size=(40, 3)) * scale @ R.T + rng.uniform(-30, 30, 3))
     pts = np.vstack(pts)
     q = pts[rng.choice(len(pts), 500)] + rng.normal(0, 0.05, (500, 3))
-    tree = cKDTree(pts)
+    fmap = VoxelMap(0.0, 0.0)  # every point its own entry
+    fmap.add(0, pts, pts)
     prm = RegistrationParams()
-    _, idx = tree.query(q, k=5)
+    _, idx = cKDTree(pts).query(q, k=5)
     nb = pts[idx]
     dev = nb - nb.mean(axis=1, keepdims=True)
     lam, vec = np.linalg.eigh(np.einsum("mki,mkj->mij", dev, dev) / 5)
     for line in (True, False):
-        rows, cen, n1, n2 = fit_neighbourhoods(tree, pts, q, 5, np.inf, line, prm)
+        rows, cen, n1, n2 = fit_neighbourhoods(fmap, q, 5, 100.0, line, prm)
         if line:
             expected = lam[:, 2] > prm.line_ratio * lam[:, 1]
         else:
@@ -312,3 +316,58 @@ def test_settled_stops_a_two_cycle_but_not_progress():
     assert not _settled(B, [A], prm)  # moved: not converged
     assert _settled(A, [A, B], prm)  # back where it was two iterations ago: a cycle
     assert _settled(retract(A, np.full(6, 1e-5)), [A], prm)  # a tiny step: LOAM's test
+
+
+def test_reused_neighbourhoods_equal_a_fresh_search():
+    """fit_neighbourhoods with a stage's state (only moved points re-searched) gives what a
+    search from scratch gives, after moves large for some points and tiny for others."""
+    rng = np.random.default_rng(4)
+    target = extract_features(synthetic_cloud(np.eye(4), ROOM, PILLARS))
+    fmap = build_feature_map([target.edge_points], [target.planar_points], None, 0.2, 0.2)
+    prm = RegistrationParams()
+    q = target.planar_points[::3] + rng.normal(0, 0.05, (len(target.planar_points[::3]), 3))
+    state = _Neighbourhoods(len(q), prm.k_neighbours)
+    fit_neighbourhoods(fmap, q, 5, 1.0, False, prm, state)
+    moves = rng.normal(size=q.shape) * np.where(rng.random(len(q)) < 0.2, 0.05, 1e-4)[:, None]
+    got = fit_neighbourhoods(fmap, q + moves, 5, 1.0, False, prm, state)
+    fresh = fit_neighbourhoods(fmap, q + moves, 5, 1.0, False, prm)
+    np.testing.assert_array_equal(got[0], fresh[0])
+    assert len(got[0]) > 100
+    for a, b in zip(got[1:], fresh[1:], strict=True):
+        np.testing.assert_allclose(a, b, atol=1e-12)
+
+
+def test_organise_cloud_keeps_the_nearest_return_per_pixel():
+    """Against a sort-based reference: per (ring, column) bin the nearest point, in pixel order;
+    points between rings (beyond half the spacing) and at r = 0 dropped."""
+    rng = np.random.default_rng(5)
+    elev = uniform_elevations(8, np.deg2rad(-15.0), np.deg2rad(15.0))
+    e = rng.uniform(-0.3, 0.3, 4000)
+    a = rng.uniform(-np.pi, np.pi, 4000)
+    r = rng.uniform(1.0, 30.0, 4000)
+    pts = np.column_stack([r * np.cos(e) * np.cos(a), r * np.cos(e) * np.sin(a), r * np.sin(e)])
+    pts[:10] = 0.0
+    cloud = organise_cloud(pts, elev, 90)
+    ring = np.argmin(np.abs(e[:, None] - elev[None, :]), axis=1)
+    spacing = elev[1] - elev[0]
+    valid = (np.abs(e - elev[ring]) <= 0.5 * spacing) & (np.arange(4000) >= 10)
+    col = np.floor((a + np.pi) * 90 / (2 * np.pi)).astype(int) % 90
+    pix = ring * 90 + col
+    order = np.lexsort((r, pix))
+    order = order[valid[order]]
+    first = order[np.r_[True, pix[order][1:] != pix[order][:-1]]]
+    np.testing.assert_array_equal(cloud.points, pts[first])
+    np.testing.assert_array_equal(cloud.ring * 90 + cloud.column, pix[first])
+    assert np.isfinite(cloud.range_image).sum() == len(first) > 500
+
+
+def test_deskew_is_rodrigues_per_point():
+    """Against scipy's rotation vectors: p_end = Exp(−age ω) p − age v, ages of both signs."""
+    rng = np.random.default_rng(6)
+    p = rng.normal(size=(500, 3)) * 10
+    age = rng.uniform(-0.02, 0.1, 500)
+    age[:3] = 0.0
+    w, v = np.array([0.3, -0.2, 1.1]), np.array([2.0, 0.5, -0.1])
+    expected = Rotation.from_rotvec(-age[:, None] * w).apply(p) - age[:, None] * v
+    np.testing.assert_allclose(deskew(p, age, w, v), expected, atol=1e-12)
+    np.testing.assert_allclose(deskew(p, age, np.zeros(3), v), p - age[:, None] * v, atol=0)

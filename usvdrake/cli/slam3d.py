@@ -1,4 +1,5 @@
-"""``usvdrake slam3d``: lidar-IMU-GPS factor-graph SLAM (Roboat II §V) on a recording."""
+"""``usvdrake slam3d``: lidar-IMU-GPS factor-graph SLAM (Roboat II §V) on a recording, or lidar
+only (constant-twist prediction, as KISS-ICP) when the recording has no IMU or with --no-imu."""
 
 import json
 import sys
@@ -47,16 +48,22 @@ def add_arguments(s3) -> None:
         default=None,
         help="take the SLAM config, lidar mount and datum from this scenario (default: defaults)",
     )
+    s3.add_argument(
+        "--no-imu",
+        action="store_true",
+        help="withhold the IMU: lidar only (also when the log has none)",
+    )
     s3.add_argument("--no-gps", action="store_true", help="no GPS factors")
-    s3.add_argument("--no-loop", action="store_true", help="no loop closures")
+    s3.add_argument("--no-loop", "--no-loops", action="store_true", help="no loop closures")
     s3.add_argument("--quiet", action="store_true", help="no progress bar")
     s3.add_argument("--json", action="store_true", help="print the metrics as JSON instead")
 
 
 def run(args) -> int:
-    """Roboat II §V's lidar-IMU-GPS SLAM on a recording: a one-screen summary (or the metrics
-    as JSON with --json); with --out, DIR/metrics.json and DIR/trajectory.tum (keyframes,
-    final estimates)."""
+    """Roboat II §V's lidar-IMU-GPS SLAM on a recording with the sensors it has (or fewer, by
+    --no-imu / --no-gps / --no-loop): a one-screen summary that names them (or the metrics as
+    JSON with --json); with --out, DIR/metrics.json and DIR/trajectory.tum (keyframes, final
+    estimates)."""
     if not Path(args.log).exists():
         raise ConfigError(
             args.log, "", "a mission log (.mcap or run folder) or a ROS 1/2 bag", "no such file"
@@ -76,6 +83,7 @@ def run(args) -> int:
         lidar_topic=args.lidar_topic,
         imu_topic=args.imu_topic,
         gps_topic=args.gps_topic,
+        use_imu=False if args.no_imu else None,
     )
     if not result.metrics.get("lidar_messages"):
         skipped = result.metrics.get("skipped_records", 0)
@@ -91,7 +99,10 @@ def run(args) -> int:
     if args.json:
         print(text)
     else:
-        print(f"usvdrake slam3d {args.log}: {result.metrics.get('slam_keyframes', 0)} keyframes")
+        m = result.metrics
+        print(
+            f"usvdrake slam3d {args.log}: {m.get('mode')}, {m.get('slam_keyframes', 0)} keyframes"
+        )
         print("\n".join(table(result.metrics)))
     if args.out:
         out = Path(args.out)

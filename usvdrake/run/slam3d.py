@@ -17,10 +17,18 @@ exactly as the live :class:`~usvdrake.systems.slam.factor_graph_slam.FactorGraph
   last IMU sample, what the ``slam_pose`` port outputs — so :func:`slam3d_metrics` scores the
   offline run like the live one.
 
+Which sensors it uses is decided from the recording and the switches: the IMU when the log has
+IMU samples (before its first sweep or within :data:`DETECT_HORIZON` after) and the config's
+``use_imu`` and the ``use_imu`` argument allow it — else lidar only, the constant-twist
+prediction of :class:`~usvdrake.systems.slam.lidar_inertial.ConstantTwistPredictor` (KISS-ICP,
+Vizzo et al. 2023); GPS when fixes are there and the graph's ``use_gps`` and a datum allow it;
+loop closures by ``use_loop_closure``. ``metrics["mode"]`` says which (:func:`sensor_mode`).
+
 :func:`ablation` runs the three variants of Roboat II §VI-A on one recording — lidar only, lidar +
 GPS, lidar + GPS + loop closure — and :func:`format_table` / :func:`plot_ablation` show them.
 """
 
+import itertools
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
@@ -46,6 +54,7 @@ from usvdrake.systems.slam.slam_summary import summarise_3d
 
 SAME_TIME = 1e-6  # [s] messages closer than this are of one instant (ordered IMU, GPS, lidar)
 KIND_ORDER = {"imu": 0, "gps": 1, "lidar": 2}
+DETECT_HORIZON = 1.0  # [s] after the first sweep: an IMU sample by then means the log has an IMU
 
 # the variants of Roboat II §VI-A: (name, use_gps, use_loop_closure), run without our water-level
 # factor (Roboat II's graph has none, and it would hide the vertical drift the ablation is about)
@@ -115,6 +124,29 @@ def _ticks(stream: Iterator[SensorMessage]) -> Iterator[tuple[float, list[Sensor
         yield group[0].time, sorted(group, key=lambda g: KIND_ORDER[g.kind])
 
 
+def _peek(
+    stream: Iterator[SensorMessage], horizon: float = DETECT_HORIZON
+) -> tuple[list[SensorMessage], Iterator[SensorMessage]]:
+    """(the messages up to ``horizon`` s after the first sweep, the whole stream again)."""
+    head: list[SensorMessage] = []
+    t_lidar = None
+    for m in stream:
+        head.append(m)
+        if t_lidar is None and m.kind == "lidar":
+            t_lidar = m.time
+        if t_lidar is not None and m.time > t_lidar + horizon:
+            break
+    return head, itertools.chain(head, stream)
+
+
+def sensor_mode(imu: bool, gps: bool, loops: bool) -> str:
+    """The run's sensors in words: "lidar only", "lidar + IMU", "lidar + IMU + GPS", each
+    with " + loops" when loop closure is on."""
+    parts = ["lidar"] + ["IMU"] * imu + ["GPS"] * gps
+    mode = "lidar only" if len(parts) == 1 else " + ".join(parts)
+    return mode + " + loops" * loops
+
+
 def run_slam3d(
     path: str | Path,
     config: LidarInertialConfig,
@@ -127,6 +159,7 @@ def run_slam3d(
     gps_topic: str | None = None,
     t0: float | None = None,
     description: str = "",
+    use_imu: bool | None = None,
 ) -> Slam3DResult:
     """Run :class:`LidarInertialSlam` over a recording (module doc) and score it.
 
@@ -153,6 +186,9 @@ def run_slam3d(
         pose, else the first message's time.
     description
         A label stored as ``metrics["variant"]`` when given.
+    use_imu
+        False: withhold the IMU samples (lidar only); None / True: use them if the log has them
+        and ``config.use_imu`` (module doc).
 
     Raises
     ------
@@ -163,7 +199,11 @@ def run_slam3d(
     damage = ReadDamage()  # what a damaged log made the readers skip (metrics: skipped_records)
     stream = read_sensor_stream(path, lidar_topic, imu_topic, gps_topic, damage=damage)
     truth = read_ground_truth(path, damage=damage)
-    first = next(stream, None)
+    head, stream = _peek(stream)
+    first = head[0] if head else None
+    imu_used = bool(config.use_imu and use_imu is not False and any(m.kind == "imu" for m in head))
+    if imu_used != config.use_imu:
+        config = replace(config, use_imu=imu_used)  # lidar only: constant-twist prediction
     source = "given"
     if initial_pose is None:
         if truth is not None and len(truth[0]):
@@ -179,12 +219,7 @@ def run_slam3d(
     frame = LocalFrame(datum) if datum else None
     slam = LidarInertialSlam(config, np.asarray(initial_pose, float), _mount(mount), frame, t0)
 
-    def messages():
-        if first is not None:
-            yield first
-        yield from stream
-
-    it = messages()
+    it = stream
     bar = None
     if progress:
         bar = tqdm(unit="msg", desc=f"slam3d {description or path.name}")
@@ -196,9 +231,12 @@ def run_slam3d(
     skipped_clouds = 0
     wall0 = time.perf_counter()
     t_first = t_last = None
+    lidar_only = slam.lidar_only
     for t, group in _ticks(it):
         while i < len(gt_t) and gt_t[i] <= t + SAME_TIME:  # before the messages of gt_t[i]
-            online[i] = planar_pose(slam.pose())
+            # lidar only, the constant twist predicts to the sample's time (there are no IMU
+            # samples to carry the pose past the last sweep)
+            online[i] = planar_pose(slam.pose(gt_t[i] if lidar_only else None))
             i += 1
         t_first = t if t_first is None else t_first
         t_last = t
@@ -219,7 +257,7 @@ def run_slam3d(
         if bar is not None:
             bar.update(len(group))
     while i < len(gt_t):
-        online[i] = planar_pose(slam.pose())
+        online[i] = planar_pose(slam.pose(gt_t[i] if lidar_only else None))
         i += 1
     wall = time.perf_counter() - wall0
     if bar is not None:
@@ -229,8 +267,11 @@ def run_slam3d(
     metrics: dict = {"log": str(path)}
     if description:
         metrics["variant"] = description
+    use_gps = bool(config.graph.use_gps and frame is not None)
     metrics |= {
-        "use_gps": bool(config.graph.use_gps and frame is not None),
+        "mode": sensor_mode(imu_used, use_gps and counts["gps"] > 0, config.graph.use_loop_closure),
+        "imu_used": imu_used,
+        "use_gps": use_gps,
         "use_loop_closure": bool(config.graph.use_loop_closure),
         "water_level": bool(config.graph.water_level_sigma > 0),
         "initial_pose": source,

@@ -21,15 +21,13 @@ local ENU frame of :class:`usvdrake.sensors.geodesy.LocalFrame`), and these fact
   waterline, t_z = h (a 1-residual ``CustomFactor``, ∂t_z/∂v = R[2, :] for Pose3's right
   perturbation t ← t + R v). See ``water_level_sigma``.
 * **GPS factor** (Roboat II §V-B): a fix converted to ENU (Roboat II ref. [27]; here pyproj's
-topocentric
-  conversion) becomes a ``GPSFactor`` on the keyframe it is associated with — only after the
-  validity, covariance and χ² innovation checks of :meth:`FactorGraph3D.add_gps`.
-* **Loop closure factor** (Roboat II §V-C): the nearest old keyframe i within 15 m (Euclidean, on
-the
-  current estimate), excluding the most recent ones; the new keyframe is registered against the
-  map of keyframes i−m … i+m (m = 12) and, when the match converges with a small RMS and is not
-  degenerate, ``BetweenFactor`` X(i)⁻¹X(k) is added (Gaussian, as LIO-SAM's), followed by extra
-  iSAM2 updates (as LIO-SAM's ``addLoopFactor`` + repeated ``isam->update()``).
+  topocentric conversion) becomes a ``GPSFactor`` on the keyframe it is associated with — only
+  after the validity, covariance and χ² innovation checks of :meth:`FactorGraph3D.add_gps`.
+* **Loop closure factor** (Roboat II §V-C): the nearest old keyframe i within 15 m (Euclidean,
+  on the current estimate), excluding the most recent ones; the new keyframe is registered
+  against the map of keyframes i−m … i+m (m = 12) and, when the match converges with a small
+  RMS and is not degenerate, ``BetweenFactor`` X(i)⁻¹X(k) is added (Gaussian, as LIO-SAM's),
+  followed by extra iSAM2 updates (LIO-SAM's ``addLoopFactor`` + repeated ``isam->update()``).
 
 Every new keyframe triggers ``ISAM2.update`` (Kaess et al., "iSAM2: Incremental smoothing and
 mapping using the Bayes tree", IJRR 2012, Roboat II ref. [24]). All state is plain Python / numpy /
@@ -53,8 +51,8 @@ from usvdrake.systems.slam.scan_registration3d import (
     build_feature_map,
     register_scan,
     transform_points,
-    voxel_downsample,
 )
+from usvdrake.systems.slam.voxel_map import VoxelMap, voxel_filter
 
 
 def _odometry_registration() -> RegistrationParams:
@@ -284,6 +282,8 @@ class FactorGraph3D:
         self._planes: list[np.ndarray] = []  # per keyframe F^p
         self._poses = np.zeros((0, 4, 4))  # current estimates T_world_keyframe (n × 4 × 4)
         self._world_cache: dict[int, tuple] = {}  # i → (pose, edges, planes) in the world
+        # M_t of the odometry match, edited in place as the window slides (no rebuild)
+        self._local_map = VoxelMap(c.submap_edge_voxel, c.submap_planar_voxel)
         self._last_loop = -(10**9)
         self._last_gps: np.ndarray | None = None  # position of the last keyframe with GPS
         self._last_gps_time: float | None = None  # [s] time of its fix
@@ -292,8 +292,7 @@ class FactorGraph3D:
         self.loops: list[tuple[int, int]] = []  # (old i, new k) of accepted loop factors
         self.registrations: list[RegistrationResult | None] = []  # odometry match per keyframe
 
-    # --- keyframes and lidar odometry (Roboat II §V-A)
-    # -------------------------------------------------
+    # --- keyframes and lidar odometry (Roboat II §V-A) -------------------------------------------
 
     def _world_clouds(self, i: int) -> tuple[np.ndarray, np.ndarray]:
         """Keyframe i's (edges, planes) in the world frame at its current estimate, cached
@@ -306,6 +305,11 @@ class FactorGraph3D:
         e, p = transform_points(T, self._edges[i]), transform_points(T, self._planes[i])
         self._world_cache[i] = (T.copy(), e, p)
         return e, p
+
+    def _local_submap(self, indices: range) -> VoxelMap:
+        """M_t over ``indices``, edited in place (:meth:`VoxelMap.slide`), not rebuilt."""
+        self._local_map.slide(indices, self._poses, self._edges, self._planes)
+        return self._local_map
 
     def _submap(self, indices: range):
         c = self.config
@@ -354,14 +358,14 @@ class FactorGraph3D:
         # submaps merge 25 of them per keyframe; register_scan is told not to filter again
         # (a centroid stays in its voxel, so a second pass would only re-sort the points)
         r = c.registration
-        edges = voxel_downsample(features.edge_points, r.source_edge_voxel)
-        planes = voxel_downsample(features.planar_points, r.source_planar_voxel)
+        edges = voxel_filter(features.edge_points, r.source_edge_voxel)  # a hash, not a sort
+        planes = voxel_filter(features.planar_points, r.source_planar_voxel)
         features = LidarFeatures(edge_points=edges, planar_points=planes)
         if k == 0:
             T_k, res = T_guess, None
             graph.add(gtsam.PriorFactorPose3(X(0), gtsam.Pose3(T_k), self._prior_noise))
         else:
-            fmap = self._submap(range(max(0, k - c.submap_keyframes), k))
+            fmap = self._local_submap(range(max(0, k - c.submap_keyframes), k))
             for i in [i for i in self._world_cache if i < k - c.submap_keyframes]:
                 del self._world_cache[i]  # only the sliding window is reused
             res = register_scan(features, fmap, T_guess, self._registration_ds)
@@ -400,6 +404,13 @@ class FactorGraph3D:
             timing.loop = time.perf_counter() - t0
         return k
 
+    def track(self, features: LidarFeatures, T_guess: np.ndarray, degeneracy: float):
+        """Register a sweep's features (sensor frame, down-sampled as a keyframe's) against the
+        odometry submap, adding nothing (lidar-only tracking), with this degeneracy threshold."""
+        k, prm = len(self._poses), replace(self._registration_ds, degeneracy_threshold=degeneracy)
+        fmap = self._local_submap(range(max(0, k - self.config.submap_keyframes), k))
+        return register_scan(features, fmap, T_guess, prm)
+
     def _refresh(self) -> None:
         # one C++ call for all poses (rows: R row-major, t), in key order = keyframe order;
         # 4x faster than reading 2000 Pose3 one by one
@@ -410,8 +421,7 @@ class FactorGraph3D:
         P[:, 3, 3] = 1.0
         self._poses = P
 
-    # --- GPS factor (Roboat II §V-B)
-    # -------------------------------------------------------------------
+    # --- GPS factor (Roboat II §V-B) -------------------------------------------------------------
 
     def _reject(self, reason: str) -> bool:
         self.counts.gps_rejected[reason] = self.counts.gps_rejected.get(reason, 0) + 1
@@ -503,8 +513,7 @@ class FactorGraph3D:
         z = np.array([e, n, u - antenna_height])
         return self.add_gps(k, z, fix.covariance_enu, fix.valid, float(fix.time))
 
-    # --- loop closure (Roboat II §V-C)
-    # -----------------------------------------------------------------
+    # --- loop closure (Roboat II §V-C) -----------------------------------------------------------
 
     def loop_candidate(self, k: int) -> int | None:
         """Nearest keyframe i ≤ k − ``loop_min_index_gap`` within ``loop_search_radius`` of

@@ -34,6 +34,7 @@ An unorganised cloud (a PCD/PLY file, a driver without ring numbers) is organise
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
 from usvdrake.sensors.messages import PointCloud
 
@@ -85,18 +86,24 @@ def roughness(ranges: np.ndarray, ring: np.ndarray, neighbours: int = 5) -> np.n
     ring: (M,) their ring; neighbours: N, half the window. Returns c (M,) [-],
     ``c_i = (Σ_{0<|j−i|≤N} (r_j − r_i) / (2N r_i))²``, NaN where the window i−N..i+N leaves
     the ring of i."""
-    r = np.asarray(ranges, dtype=float)
-    ring = np.asarray(ring)
-    m, n = len(r), int(neighbours)
+    return _roughness_kernel(
+        np.ascontiguousarray(ranges, dtype=float), np.ascontiguousarray(ring), int(neighbours)
+    )
+
+
+@njit(cache=True)
+def _roughness_kernel(r, ring, n):
+    m = len(r)
     c = np.full(m, np.nan)
     if m < 2 * n + 1:
         return c
-    s = np.concatenate([[0.0], np.cumsum(r)])
-    i = np.arange(n, m - n)
-    window_sum = s[i + n + 1] - s[i - n] - r[i]  # Σ_{j≠i} r_j
-    ok = (ring[i - n] == ring[i]) & (ring[i + n] == ring[i])
-    diff = window_sum - 2 * n * r[i]
-    c[i[ok]] = (diff[ok] / (2 * n * r[i[ok]])) ** 2
+    s = np.zeros(m + 1)  # running sums: the window sum is a difference of two
+    for i in range(m):
+        s[i + 1] = s[i] + r[i]
+    for i in range(n, m - n):
+        if ring[i - n] == ring[i] and ring[i + n] == ring[i]:
+            diff = (s[i + n + 1] - s[i - n] - r[i]) - 2 * n * r[i]  # Σ_{j≠i} r_j − 2N r_i
+            c[i] = (diff / (2 * n * r[i])) ** 2
     return c
 
 
@@ -166,21 +173,32 @@ def _sector_of(ring: np.ndarray, sectors: int) -> np.ndarray:
 
 def _local_extremum(score: np.ndarray, ring: np.ndarray, n: int) -> np.ndarray:
     """True where ``score`` is the strict maximum of its ±n window on the same ring (ties go
-    to the first). The vectorised form of LOAM's "mark the neighbours of a picked point"."""
-    m = len(score)
-    pad = np.full(m + 2 * n, -np.inf)
-    pad[n : n + m] = score
-    ring_pad = np.full(m + 2 * n, -1)
-    ring_pad[n : n + m] = ring
-    win = np.lib.stride_tricks.sliding_window_view(pad, 2 * n + 1)
-    win_ring = np.lib.stride_tricks.sliding_window_view(ring_pad, 2 * n + 1)
-    win = np.where(win_ring == ring[:, None], win, -np.inf)
-    left, right = win[:, :n], win[:, n + 1 :]
-    return (
-        np.isfinite(score)
-        & (score > left.max(axis=1, initial=-np.inf))
-        & (score >= right.max(axis=1, initial=-np.inf))
+    to the first). LOAM's "mark the neighbours of a picked point", as a mask."""
+    return _local_extremum_kernel(
+        np.ascontiguousarray(score, dtype=float), np.ascontiguousarray(ring), int(n)
     )
+
+
+@njit(cache=True)
+def _local_extremum_kernel(score, ring, n):
+    m = len(score)
+    out = np.zeros(m, dtype=np.bool_)
+    for i in range(m):
+        si = score[i]
+        if not np.isfinite(si):
+            continue
+        best = True
+        for j in range(max(0, i - n), i):  # left: strictly above
+            if ring[j] == ring[i] and score[j] >= si:
+                best = False
+                break
+        if best:
+            for j in range(i + 1, min(m, i + n + 1)):  # right: at least as high
+                if ring[j] == ring[i] and score[j] > si:
+                    best = False
+                    break
+        out[i] = best
+    return out
 
 
 def _top_per_sector(candidates: np.ndarray, key: np.ndarray, sector: np.ndarray, k: int | None):
@@ -214,6 +232,18 @@ def pixel_points(cloud: PointCloud) -> np.ndarray:
     return out
 
 
+def _points_at(cloud: PointCloud, ring: np.ndarray, col: np.ndarray) -> np.ndarray:
+    """:func:`pixel_points` at the pixels (ring, col) only (K × 3) [m]: the whole image of
+    points is not built."""
+    if len(cloud.points):
+        row = np.full(np.shape(cloud.range_image), -1, dtype=np.int64)
+        row[cloud.ring, cloud.column] = np.arange(len(cloud.points))
+        return np.asarray(cloud.points, dtype=float)[row[ring, col]]
+    r = np.asarray(cloud.range_image, dtype=float)[ring, col]
+    e, a = np.asarray(cloud.elevations)[ring], np.asarray(cloud.azimuths)[col]
+    return np.column_stack([r * np.cos(e) * np.cos(a), r * np.cos(e) * np.sin(a), r * np.sin(e)])
+
+
 def extract_features(cloud: PointCloud, params: FeatureParams | None = None) -> LidarFeatures:
     """Edge and planar features of one sweep (Roboat II §V-A; LOAM §V-A; LIO-SAM featureExtraction).
 
@@ -237,10 +267,11 @@ def extract_features(cloud: PointCloud, params: FeatureParams | None = None) -> 
     if p.max_planar_per_sector is not None:
         flat &= _local_extremum(np.where(flat, -c, -np.inf), ring, p.neighbours)
     planar = _top_per_sector(flat, -np.where(flat, c, np.inf), sector, p.max_planar_per_sector)
-    xyz = pixel_points(cloud)
+    both = np.r_[edges, planar]
+    xyz = _points_at(cloud, ring[both], col[both])
     return LidarFeatures(
-        edge_points=xyz[ring[edges], col[edges]],
-        planar_points=xyz[ring[planar], col[planar]],
+        edge_points=xyz[: len(edges)],
+        planar_points=xyz[len(edges) :],
         edge_pixels=np.column_stack([ring[edges], col[edges]]),
         planar_pixels=np.column_stack([ring[planar], col[planar]]),
         edge_roughness=c[edges],
@@ -268,31 +299,71 @@ def organise_cloud(
     the adjacent beams, and to column ⌊(azimuth + π) · columns / 2π⌋; of several points in one
     pixel the nearest is kept. Returns a :class:`PointCloud` whose ``points`` are the kept
     input points (measured, not re-projected) with their ring and column."""
-    pts = np.asarray(points, dtype=float)
+    pts = np.asarray(points, dtype=float).reshape(-1, 3)
     elev = np.asarray(elevations, dtype=float)
-    r = np.linalg.norm(pts, axis=1)
-    ok = np.isfinite(r) & (r > 0)
-    pts, r = pts[ok], r[ok]
-    e = np.arcsin(np.clip(pts[:, 2] / r, -1.0, 1.0))
-    a = np.arctan2(pts[:, 1], pts[:, 0])
-    k = np.clip(np.searchsorted(elev, e), 1, len(elev) - 1)
-    lower_closer = (e - elev[k - 1]) < (elev[k] - e)
-    ring = np.where(lower_closer, k - 1, k)
     spacing = np.gradient(elev) if len(elev) > 1 else np.array([np.inf])
-    in_ring = np.abs(e - elev[ring]) <= 0.5 * spacing[ring]
-    col = azimuth_column(a, columns)
-    pts, r, ring, col = pts[in_ring], r[in_ring], ring[in_ring], col[in_ring]
-    img, keep = nearest_per_pixel(r, ring, col, len(elev), columns)
+    # the ring tests in sin(elevation) = z / r, which is monotone in the elevation: no arcsin
+    # per point (the mid-points between rings and each ring's ± half spacing, as sines)
+    half = np.pi / 2
+    sin_mid = np.sin(np.r_[(elev[:-1] + elev[1:]) / 2, half])
+    sin_lo = np.sin(np.clip(elev - 0.5 * spacing, -half, half))
+    sin_hi = np.sin(np.clip(elev + 0.5 * spacing, -half, half))
+    img, keep, ring, col, kept = _organise_kernel(
+        pts, np.sin(elev), sin_mid, sin_lo, sin_hi, int(columns)
+    )
     return PointCloud(
         time=time,
         elevations=elev,
         azimuths=column_azimuths(columns),
         range_image=img,
-        points=pts[keep],
-        ring=ring[keep],
-        column=col[keep],
+        points=kept,
+        ring=ring,
+        column=col,
         point_time=np.zeros(len(keep)),
     )
+
+
+@njit(cache=True)
+def _organise_kernel(pts, sin_elev, sin_mid, sin_lo, sin_hi, columns):
+    """One pass of :func:`organise_cloud`: per pixel the nearest return (the first of equal
+    ones). Returns (range image, kept rows of pts in pixel order, their rings, their columns,
+    the kept points)."""
+    rings = len(sin_elev)
+    best = np.full(rings * columns, -1, dtype=np.int64)
+    img = np.full((rings, columns), np.inf)
+    for i in range(len(pts)):
+        x, y, z = pts[i, 0], pts[i, 1], pts[i, 2]
+        r = np.sqrt(x * x + y * y + z * z)
+        if not (np.isfinite(r) and r > 0.0):
+            continue
+        e = min(1.0, max(-1.0, z / r))  # sin(elevation)
+        if rings > 1:
+            k = min(max(np.searchsorted(sin_elev, e), 1), rings - 1)
+            ring = k - 1 if e < sin_mid[k - 1] else k  # the nearer of rings k − 1, k
+        else:
+            ring = 0
+        if not (sin_lo[ring] <= e <= sin_hi[ring]):
+            continue
+        a = np.arctan2(y, x)
+        col = int(np.floor((a + np.pi) * columns / (2 * np.pi))) % columns
+        if best[ring * columns + col] < 0 or r < img[ring, col]:
+            best[ring * columns + col] = i
+            img[ring, col] = r
+    n = 0
+    for p in range(rings * columns):
+        if best[p] >= 0:
+            n += 1
+    keep = np.empty(n, dtype=np.int64)
+    ring_out = np.empty(n, dtype=np.int64)
+    col_out = np.empty(n, dtype=np.int64)
+    kept = np.empty((n, 3))
+    n = 0
+    for p in range(rings * columns):
+        if best[p] >= 0:
+            keep[n], ring_out[n], col_out[n] = best[p], p // columns, p % columns
+            kept[n, 0], kept[n, 1], kept[n, 2] = pts[best[p], 0], pts[best[p], 1], pts[best[p], 2]
+            n += 1
+    return img, keep, ring_out, col_out, kept
 
 
 def azimuth_column(azimuth: np.ndarray, columns: int) -> np.ndarray:

@@ -17,6 +17,15 @@ Per sensor message, in time order (:class:`LidarInertialSlam`):
   LOAM features are extracted (:func:`lidar_features.extract_features`), moved to the body
   frame through the lidar mount, and added to :class:`FactorGraph3D`, whose registration
   against the previous 25 keyframes starts from the IMU guess.
+* **Lidar only** (``use_imu`` False, or no IMU in the recording): :class:`ConstantTwistPredictor`
+  stands in for the IMU, as in KISS-ICP (Vizzo et al., RA-L 2023, §III-A): every sweep is
+  de-skewed with the twist of the last step ξ = Log(T_{j−1}⁻¹ T_j)/Δt and its per-point times,
+  and registered against the odometry submap (:meth:`FactorGraph3D.track`) from the guess
+  T_{j−1} Exp(Δt ξ); its pose (x, y, heading: a hull's height and tilt change only at the
+  keyframes, :func:`hold_vertical`) decides the keyframe, which the graph then refines, and
+  gives the next twist. Gravity is not measured, so the attitude factor takes the world's up along
+  the body's z with ``level_sigma`` (a floating hull is level on average; the AHRS's 0.25° is
+  not claimed).
 * **GPS** (Roboat II §V-B): the fixes are kept for ``gps_window`` s; a keyframe takes the valid fix
   nearest in time within ``gps_max_offset`` (LIO-SAM: 0.2 s), converted to the local ENU frame
   with pyproj (:class:`usvdrake.sensors.geodesy.LocalFrame`) and gated by the graph.
@@ -31,6 +40,7 @@ import time
 from collections import deque
 from dataclasses import dataclass, field, replace
 
+import gtsam
 import numpy as np
 
 from usvdrake.sensors.geodesy import LocalFrame
@@ -48,6 +58,7 @@ from usvdrake.systems.slam.scan_registration3d import (
     transform_points,
     voxel_downsample,
 )
+from usvdrake.systems.slam.voxel_map import voxel_filter
 
 
 @dataclass
@@ -67,6 +78,27 @@ class LidarInertialConfig:
     gps_window: float = 2.0  # [s] fixes kept for association
     gps_antenna_height: float = 0.0  # [m] antenna above the body origin (``GpsConfig``)
     map_voxel: float = 0.5  # [m] voxel of the map drawn / returned by ``map_points``
+    # False: lidar only — IMU samples are ignored and ConstantTwistPredictor predicts (module
+    # doc); ``usvdrake slam3d`` sets it when a recording has no IMU or with --no-imu
+    use_imu: bool = True
+    # [rad] lidar only: σ of the attitude factor that takes the body's z as the world's up (a
+    # hull floating on calm canal water rolls and pitches by ~1°; without gravity the tilt
+    # would drift through the submaps and a 1° pitch climbs 1.7 cm per metre). ≤ 0: none
+    level_sigma: float = float(np.deg2rad(1.0))
+    # [s] lidar only: the twist is the motion over the sweeps of this last stretch (one sweep's
+    # step is noisy: ±5 mm, ±0.05 m/s at 10 Hz; 0.1, 0.5 and 1 s scored alike on canal_survey)
+    twist_window: float = 0.5
+    # [-] lidar only: map neighbours per correspondence (LOAM: 5). Registered from the true
+    # pose against a submap at the true poses (canal_survey, 114 sweeps), the past-only submap
+    # pulled every match 8 mm forward with 5 neighbours (−16 mm with a future-only submap,
+    # −1 mm with both) and 1.2 mm with 8: 0.8 % of the distance travelled that the IMU's guess
+    # hides and the constant twist keeps. 10 find too few pairs in the first sweep's map.
+    lidar_only_neighbours: int = 8
+    # [-] lidar only: degeneracy threshold of the per-sweep match (Zhang 2016; the keyframes'
+    # keep the graph's, so their weak directions stay loose for the water-level and level
+    # priors). The graph's 10 keeps the guess along a canal's walls, which the IMU makes good
+    # and the constant twist does not: from rest it stayed 0.6 m behind in 2 s (seed 1)
+    lidar_only_degeneracy: float = 0.1
 
 
 def pose_matrix(x: float, y: float, z: float, yaw: float) -> np.ndarray:
@@ -175,6 +207,92 @@ class ImuPropagator:
         return self.T[:3, :3].T @ self.v
 
 
+class ConstantTwistPredictor:
+    """The lidar-only motion prior (KISS-ICP's constant velocity model, Vizzo et al., RA-L 2023,
+    §III-A, on SE(3)): T(t) = T_j Exp((t − t_j) ξ) from the last sweep's pose T_j at t_j
+    with the body twist ξ = (ω [rad/s], v [m/s]) (gtsam's Pose3 tangent order). Along T(t) the
+    body-frame angular and linear velocities are ξ itself, so ``omega`` / ``v_body`` de-skew a
+    sweep as the IMU's rates do. ``surface``: the twist keeps only the yaw rate and the
+    horizontal velocity in the world frame (Roboat II eq. (1) is 3-DOF: a hull does not climb or
+    keep turning about a horizontal axis).
+
+    The same interface as :class:`ImuPropagator` where :class:`LidarInertialSlam` uses it:
+    ``reset``, ``predict``, ``T``, ``t``, ``v``, ``v_body``, ``omega``, ``up`` (None: gravity
+    is not measured)."""
+
+    def __init__(self, surface: bool = True):
+        self.surface = surface
+        self.T_ref = np.eye(4)  # T_world_body at t_ref [m]
+        self.t_ref = 0.0  # [s] time of the last keyframe
+        self.t = 0.0  # [s] latest time seen (a sweep's end)
+        self.xi = np.zeros(6)  # body twist (ω, v)
+        self.up: np.ndarray | None = None
+        self.steps = 0
+
+    def reset(self, T: np.ndarray, xi: np.ndarray, t: float) -> None:
+        """Restart from pose T (4 × 4) at time t [s] with body twist ξ (6,)."""
+        self.T_ref = np.array(T, dtype=float)
+        self.xi = self.level_twist(self.T_ref[:3, :3], np.asarray(xi, dtype=float))
+        self.t_ref = self.t = float(t)
+
+    def level_twist(self, R: np.ndarray, xi: np.ndarray) -> np.ndarray:
+        """ξ with, for a surface vessel (``surface``), the world-frame roll / pitch rates and
+        vertical velocity removed; R: the body's rotation."""
+        if not self.surface:
+            return xi.copy()
+        w, v = R @ xi[:3], R @ xi[3:]
+        w[:2] = 0.0
+        v[2] = 0.0
+        return np.r_[R.T @ w, R.T @ v]
+
+    def advance(self, t: float) -> None:
+        """Note that time t [s] has been reached (``pose()`` predicts to it)."""
+        self.t = max(self.t, float(t))
+
+    def predict(self, t: float) -> np.ndarray:
+        """T(t) (4 × 4), extrapolated with the twist from the last reset."""
+        return self.T_ref @ gtsam.Pose3.Expmap(self.xi * (float(t) - self.t_ref)).matrix()
+
+    @property
+    def T(self) -> np.ndarray:
+        """The pose at the latest time seen (4 × 4)."""
+        return self.predict(self.t)
+
+    @property
+    def omega(self) -> np.ndarray:
+        """Body angular velocity [rad/s]."""
+        return self.xi[:3]
+
+    @property
+    def v_body(self) -> np.ndarray:
+        """Body-frame velocity [m/s]."""
+        return self.xi[3:]
+
+    @property
+    def v(self) -> np.ndarray:
+        """World-frame velocity [m/s] at the latest time seen."""
+        return self.T[:3, :3] @ self.xi[3:]
+
+
+def hold_vertical(T: np.ndarray, T_ref: np.ndarray) -> np.ndarray:
+    """T's position in x-y and heading with T_ref's height and tilt (roll, pitch): T_ref's
+    rotation turned about the world's z to T's heading."""
+    d = planar_pose(T)[2] - planar_pose(T_ref)[2]
+    c, s = np.cos(d), np.sin(d)
+    out = T_ref.copy()
+    out[:3, :3] = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ T_ref[:3, :3]
+    out[:2, 3] = T[:2, 3]
+    return out
+
+
+def twist_between(T_a: np.ndarray, T_b: np.ndarray, dt: float) -> np.ndarray:
+    """The constant body twist ξ (ω [rad/s], v [m/s]) that moves T_a to T_b in dt [s]:
+    Log(T_a⁻¹ T_b)/dt (SE(3) logarithm; zero for dt ≤ 0)."""
+    if dt <= 0:
+        return np.zeros(6)
+    return np.asarray(gtsam.Pose3.Logmap(gtsam.Pose3(np.linalg.inv(T_a) @ T_b))) / dt
+
+
 @dataclass
 class KeyframeRecord:
     """What the front end knows about one keyframe (for metrics and the offline runner)."""
@@ -232,11 +350,20 @@ class LidarInertialSlam:
         t0: float = 0.0,
     ):
         self.config = config
-        self.graph = FactorGraph3D(config.graph)
+        graph = config.graph
+        if not config.use_imu:  # lidar only: the level hull's σ for the attitude factor
+            reg = replace(graph.registration, k_neighbours=config.lidar_only_neighbours)
+            graph = replace(graph, registration=reg, attitude_sigma=config.level_sigma)
+        self.graph = FactorGraph3D(graph)
         self.mount = np.array(mount, dtype=float)
         self.frame = frame
-        self.imu = ImuPropagator(config.gravity, config.surface_vessel)
-        self.imu.reset(initial_pose, np.zeros(3), t0)
+        self.imu: ImuPropagator | ConstantTwistPredictor
+        if config.use_imu:
+            self.imu = ImuPropagator(config.gravity, config.surface_vessel)
+            self.imu.reset(initial_pose, np.zeros(3), t0)
+        else:  # lidar only (module doc)
+            self.imu = ConstantTwistPredictor(config.surface_vessel)
+            self.imu.reset(initial_pose, np.zeros(6), t0)
         self.selector = KeyframeSelector(
             config.graph.keyframe_translation, config.graph.keyframe_rotation
         )
@@ -246,12 +373,21 @@ class LidarInertialSlam:
         self.imu_samples = 0
         self._covariance: tuple[int, np.ndarray] = (-1, np.zeros((3, 3)))  # (keyframe, Σ)
         self._map_clouds: list[np.ndarray] = []  # per keyframe its display cloud (map_voxel)
+        self.tracking_ms: list[float] = []  # lidar only: [ms] features + match, per sweep
+        self._tracked: deque[tuple[float, np.ndarray]] = deque()  # lidar only (twist_window)
 
     # --- inputs ----------------------------------------------------------------------------------
 
+    @property
+    def lidar_only(self) -> bool:
+        """Predicting with the constant twist, not the IMU (``config.use_imu`` False)."""
+        return isinstance(self.imu, ConstantTwistPredictor)
+
     def add_imu(self, sample: ImuSample) -> None:
-        self.imu.add(sample)
+        """Integrate an IMU sample (counted but ignored when lidar only)."""
         self.imu_samples += 1
+        if not self.lidar_only:
+            self.imu.add(sample)
 
     def add_gps(self, fix: GpsFix) -> None:
         """Keep a fix for association with the next keyframes (invalid fixes are kept too: the
@@ -270,15 +406,63 @@ class LidarInertialSlam:
         """Process one sweep; True when it became keyframe (then the pose estimate is
         corrected)."""
         self.sweeps += 1
+        if isinstance(self.imu, ConstantTwistPredictor):
+            return self._add_cloud_lidar_only(cloud, self.imu)
         T_pred = self.imu.predict(cloud.time)
         if not self.selector.is_keyframe(T_pred):
             return False
         t0 = time.perf_counter()
         features = self.features(cloud)
+        T_k = self._add_keyframe(cloud, T_pred, features, time.perf_counter() - t0, self.imu.up)
+        self._restart_imu(cloud.time, T_pred, T_k)
+        return True
+
+    def _add_cloud_lidar_only(self, cloud: PointCloud, p: ConstantTwistPredictor) -> bool:
+        """Lidar only, every sweep is registered against the odometry submap from the constant
+        twist's guess (KISS-ICP registers every sweep: a guess 0.1 s ahead stays good when a
+        turn starts, where one a keyframe (0.7 s) ahead was 10° off), and its pose gives the
+        next twist; a keyframe's is then refined in the graph."""
+        t0 = time.perf_counter()
+        T_pred = p.predict(cloud.time)
+        features = self.features(cloud)
         features_s = time.perf_counter() - t0
+        T = T_pred
+        if self.keyframes:
+            r = self.graph.config.registration  # down-sampled as the keyframes are
+            e = voxel_filter(features.edge_points, r.source_edge_voxel)
+            f = LidarFeatures(e, voxel_filter(features.planar_points, r.source_planar_voxel))
+            res = self.graph.track(f, T_pred, self.config.lidar_only_degeneracy)
+            if np.all(np.isfinite(res.T)):
+                # a hull's height and tilt change only at keyframes, where the graph has the
+                # water-level and level factors (as the IMU guess holds them between keyframes):
+                # the sweep's weak vertical constraints moved its height by up to 0.9 m
+                T = hold_vertical(res.T, T_pred) if self.config.surface_vessel else res.T
+        self.tracking_ms.append(1e3 * (time.perf_counter() - t0))
+        c = self.config
+        if self.selector.is_keyframe(T):
+            up = np.array([0.0, 0.0, 1.0]) if c.level_sigma > 0 else None
+            T = self._add_keyframe(cloud, T, features, features_s, up)
+            self.selector.last = T.copy()
+        past = self._tracked  # (time, pose) of the sweeps of the last twist_window
+        past.append((float(cloud.time), T))
+        while len(past) > 2 and past[1][0] <= cloud.time - c.twist_window + 1e-9:
+            past.popleft()
+        p.reset(T, twist_between(past[0][1], T, cloud.time - past[0][0]), cloud.time)
+        return len(self.keyframes) > 0 and self.keyframes[-1].time == cloud.time
+
+    def _add_keyframe(
+        self,
+        cloud: PointCloud,
+        T_guess: np.ndarray,
+        features: LidarFeatures,
+        features_s: float,
+        up: np.ndarray | None,
+    ) -> np.ndarray:
+        """Add the sweep's features as a keyframe (graph, GPS factor, record; features_s [s]:
+        their de-skew and extraction) and return its estimate T_k."""
         g = self.graph
         fix = self._fix_near(cloud.time)
-        k = g.add_keyframe(T_pred, features, up=self.imu.up)
+        k = g.add_keyframe(T_guess, features, up=up)
         self._map_clouds.append(
             voxel_downsample(
                 np.vstack([g.edge_clouds[k], g.planar_clouds[k]]), self.config.map_voxel
@@ -306,8 +490,7 @@ class LidarInertialSlam:
                 online=np.r_[T_k[:3, 3], planar_pose(T_k)[2]],
             )
         )
-        self._restart_imu(cloud.time, T_pred, T_k)
-        return True
+        return T_k
 
     def _restart_imu(self, t: float, T_pred: np.ndarray, T_k: np.ndarray) -> None:
         """Restart the IMU from the keyframe's estimate. The velocity is corrected with the lidar
@@ -343,7 +526,8 @@ class LidarInertialSlam:
     # --- outputs ---------------------------------------------------------------------------------
 
     def pose(self, t: float | None = None) -> np.ndarray:
-        """Current T_world_body (4 × 4): the last keyframe's estimate propagated by the IMU."""
+        """Current T_world_body (4 × 4): the last keyframe's estimate propagated by the IMU (lidar
+        only: by the constant twist to the last sweep)."""
         return self.imu.predict(self.imu.t if t is None else t)
 
     def state(self) -> np.ndarray:

@@ -18,22 +18,21 @@ in the mapping form of LOAM §VI-B / LIO-SAM ``scan2MapOptimization``):
   pattern (on the real HDL-32E pair of the tests it moved roll by 0.3° with the map voxel size;
   with the guard the estimate is stable to ±0.03°). For raw, noise-free maps set it to 0.
 
-The neighbourhood fits (centroid, scatter, its 3 × 3 eigen-problem in closed form after Smith
-1961, the line / plane tests) run in one numba kernel per feature type
-(:func:`fit_neighbourhoods`); the KD-tree query is scipy's.
+The map is a :class:`~usvdrake.systems.slam.voxel_map.VoxelMap` (an incremental voxel hash
+with k-NN search). The neighbourhood fits (centroid, scatter, its 3 × 3 eigen-problem in closed
+form after Smith 1961, the line / plane tests) and the LM steps run in numba kernels.
 
 Both are rows ``r_k = n_kᵀ(R p_k + t − m_k)``. The pose is perturbed on the right,
 ``T ← T · (Exp(ω), v)``, i.e. R ← R Exp(ω), t ← t + R v, ξ = (ω, v) ∈ R⁶ in the sensor
 (body) frame — gtsam's Pose3 tangent ordering, so the information matrix can go straight into
 a BetweenFactor. The Jacobian of a row is ``∂r/∂ξ = [(p × Rᵀn)ᵀ, (Rᵀn)ᵀ]``.
 
-The solver is Levenberg-Marquardt with iteratively re-weighted Huber weights
-(w = 1 for d ≤ δ, δ/d beyond, d the point's distance) over correspondences that are searched
-again at every outer iteration (as LOAM re-finds them each iteration). Degeneracy follows
-Zhang, Kaess & Singh, "On Degeneracy of Optimization-based State Estimation Problems",
-ICRA 2016: eigen-decompose H = JᵀWJ; directions with eigenvalue below
-``degeneracy_threshold`` are left out of every update (their "solution remapping"), and the
-smallest eigenvalue is reported.
+The solver is Levenberg-Marquardt with iteratively re-weighted Huber weights (w = 1 for d ≤ δ,
+δ/d beyond, d the point's distance) over correspondences searched again at every outer
+iteration, as LOAM does (a point that moved less than its neighbours' certified tolerance keeps
+them: :meth:`VoxelMap.knn_update`). Degeneracy follows Zhang 2016: eigen-decompose H = JᵀWJ;
+directions with eigenvalue below ``degeneracy_threshold`` are left out of every update (their
+"solution remapping"), and the smallest eigenvalue is reported.
 
 Coarse to fine: ``max_correspondence_distances`` lists the association radius of each stage
 (largest first); each stage iterates to convergence before the next, tighter one starts.
@@ -47,9 +46,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit
-from scipy.spatial import cKDTree
 
 from usvdrake.systems.slam.lidar_features import LidarFeatures
+from usvdrake.systems.slam.voxel_map import VoxelMap, voxel_filter
 
 
 @dataclass
@@ -75,16 +74,10 @@ class RegistrationParams:
     source_planar_voxel: float = 0.0  # [m] voxel filter of the source planar points
     initial_damping: float = 1e-4  # [-] LM λ, relative to diag(H)
     cycle_length: int = 3  # [-] also converged on returning to a pose this many iterations back
-
-
-@dataclass
-class FeatureMap:
-    """Voxel maps M^e, M^p (Roboat II §V-A) in the map frame, with their KD-trees."""
-
-    edge_points: np.ndarray  # (Ne × 3) [m]
-    planar_points: np.ndarray  # (Np × 3) [m]
-    edge_tree: cKDTree = field(repr=False)
-    planar_tree: cKDTree = field(repr=False)
+    # [m] a point's k-NN search also looks this far beyond the radius, to know how far the point
+    # may move before its neighbours can change (it is searched again only then; the answer is
+    # that of a full search). Larger: fewer re-searches, each a little dearer
+    reuse_margin: float = 0.1
 
 
 @dataclass
@@ -134,24 +127,25 @@ def build_feature_map(
     poses: Sequence[np.ndarray] | None = None,
     edge_voxel: float = 0.2,
     planar_voxel: float = 0.4,
-) -> FeatureMap:
+) -> VoxelMap:
     """Merge keyframe features into the voxel maps M^e = ∪ 'F^e, M^p = ∪ 'F^p (Roboat II §V-A).
 
     edge_clouds, planar_clouds: per keyframe, (N × 3) [m] in its sensor frame; poses: per
     keyframe T_map_keyframe (4 × 4), identity if None; edge_voxel, planar_voxel: voxel sides
-    [m] of the merged maps (LIO-SAM 0.2 / 0.4)."""
+    [m] of the merged maps (LIO-SAM 0.2 / 0.4; ≤ 0: every point). A map that changes a few
+    keyframes at a time is better edited in place (:class:`VoxelMap`)."""
     if poses is None:
         poses = [np.eye(4)] * len(edge_clouds)
-    e = [transform_points(T, p) for T, p in zip(poses, edge_clouds, strict=True)]
-    s = [transform_points(T, p) for T, p in zip(poses, planar_clouds, strict=True)]
-    e = voxel_downsample(np.vstack(e) if e else np.zeros((0, 3)), edge_voxel)
-    s = voxel_downsample(np.vstack(s) if s else np.zeros((0, 3)), planar_voxel)
-    return FeatureMap(e, s, cKDTree(e), cKDTree(s))
+    fmap = VoxelMap(edge_voxel, planar_voxel)
+    for i, (T, e, p) in enumerate(zip(poses, edge_clouds, planar_clouds, strict=True)):
+        fmap.add(i, transform_points(T, e), transform_points(T, p))
+    return fmap
 
 
+@njit(cache=True)
 def so3_exp(w: np.ndarray) -> np.ndarray:
-    """Rotation matrix Exp(ω) (Rodrigues' formula), ω (3,) [rad]."""
-    th = float(np.linalg.norm(w))
+    """Rotation matrix Exp(ω) (Rodrigues' formula), ω (3,) [rad] (numba: also in kernels)."""
+    th = np.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
     K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
     if th < 1e-8:
         return np.eye(3) + K + 0.5 * K @ K
@@ -164,16 +158,36 @@ def deskew(points: np.ndarray, age: np.ndarray, omega: np.ndarray, v: np.ndarray
     v [m/s], sensor frame). With T(t) = T_end Exp((t − t_end) ξ) the point moves by
     T_end⁻¹ T(t_i) = Exp(−age_i ξ): p_end = Exp(−age_i ω) p_i − age_i v (first order in the
     translation; over a 0.1 s sweep the neglected term is ≤ ½ |ω| |v| age² ≈ 0.1 mm)."""
-    pts = np.asarray(points, dtype=float)
-    age = np.asarray(age, dtype=float)
-    th = -age[:, None] * np.asarray(omega, dtype=float)[None, :]  # rotation vector per point
-    n = np.linalg.norm(th, axis=1, keepdims=True)
-    small = n < 1e-12
-    k = np.where(small, 0.0, th / np.where(small, 1.0, n))
-    c, s = np.cos(n), np.sin(n)
-    kxp = np.cross(k, pts)
-    rotated = pts * c + kxp * s + k * np.sum(k * pts, axis=1, keepdims=True) * (1.0 - c)
-    return rotated - age[:, None] * np.asarray(v, dtype=float)[None, :]
+    return _deskew_kernel(
+        np.ascontiguousarray(points, dtype=float).reshape(-1, 3),
+        np.ascontiguousarray(age, dtype=float).ravel(),
+        np.asarray(omega, dtype=float).ravel(),
+        np.asarray(v, dtype=float).ravel(),
+    )
+
+
+@njit(cache=True)
+def _deskew_kernel(pts, age, omega, v):
+    """:func:`deskew` per point: Rodrigues' rotation by −age·ω, then −age·v."""
+    out = np.empty_like(pts)
+    wn = np.sqrt(omega[0] ** 2 + omega[1] ** 2 + omega[2] ** 2)
+    # the axis is −ω/|ω| for every point with age > 0 (+ω/|ω| for age < 0): only the angle varies
+    kx, ky, kz = (-omega[0] / wn, -omega[1] / wn, -omega[2] / wn) if wn > 0 else (0.0, 0.0, 0.0)
+    for i in range(len(pts)):
+        px, py, pz = pts[i, 0], pts[i, 1], pts[i, 2]
+        a = age[i]
+        th = abs(a) * wn
+        if th < 1e-12:
+            out[i, 0], out[i, 1], out[i, 2] = px - a * v[0], py - a * v[1], pz - a * v[2]
+            continue
+        sgn = 1.0 if a > 0 else -1.0
+        ax, ay, az = sgn * kx, sgn * ky, sgn * kz
+        c, s = np.cos(th), np.sin(th)
+        dot = (ax * px + ay * py + az * pz) * (1.0 - c)
+        out[i, 0] = px * c + (ay * pz - az * py) * s + ax * dot - a * v[0]
+        out[i, 1] = py * c + (az * px - ax * pz) * s + ay * dot - a * v[1]
+        out[i, 2] = pz * c + (ax * py - ay * px) * s + az * dot - a * v[2]
+    return out
 
 
 def retract(T: np.ndarray, xi: np.ndarray) -> np.ndarray:
@@ -186,15 +200,22 @@ def retract(T: np.ndarray, xi: np.ndarray) -> np.ndarray:
 
 @dataclass
 class _Rows:
-    """Residual rows r_k = n_kᵀ(R p_k + t − m_k); rows of one correspondence share ``group``."""
+    """Correspondences: residuals r = n_jᵀ(R p + t − m), j = 1, 2 (planes: n2 = 0)."""
 
     p: np.ndarray  # (K × 3) source points [m], sensor frame
-    n: np.ndarray  # (K × 3) unit normals, map frame
+    n1: np.ndarray  # (K × 3) unit normals, map frame
+    n2: np.ndarray  # (K × 3) second normals of edges (⊥ n1 and the line), zero for planes
     m: np.ndarray  # (K × 3) anchor points [m], map frame
-    group: np.ndarray  # (K,) correspondence id
-    n_groups: int
     n_edge: int
     n_planar: int
+
+    @property
+    def n_groups(self) -> int:
+        return self.n_edge + self.n_planar
+
+    @property
+    def n_rows(self) -> int:  # residual rows: 2 per edge, 1 per plane
+        return 2 * self.n_edge + self.n_planar
 
 
 @njit(cache=True, inline="always")
@@ -246,23 +267,20 @@ def _sym3_eigvec(C, lam, out):
 
 
 @njit(cache=True)
-def _fit_kernel(pts, idx, ok, line, ratio, spread2, threshold):
-    """Per query row m with all k neighbours ``pts[idx[m]]`` found (``ok[m]``): the centroid
-    and scatter C = Σ (p − c)(p − c)ᵀ / k with its eigen-decomposition, then
+def _fit_kernel(pts, idx, ok, rows, line, ratio, spread2, threshold, keep, cen, n1, n2):
+    """Per query row m in ``rows`` with all k neighbours ``pts[idx[m]]`` found (``ok[m]``):
+    the centroid and scatter C = Σ (p − c)(p − c)ᵀ / k with its eigen-decomposition, then
 
     * line (edges, LOAM §VI-B): λ3 > ratio · λ2 → two unit normals ⊥ the line direction;
     * plane: λ2 ≥ spread2 · λ3 (not on one ring) and every neighbour within ``threshold`` of
       the plane through c with normal the λ1 eigenvector → that normal.
 
-    Returns (keep (M,), centroid (M × 3), n1 (M × 3), n2 (M × 3; lines only))."""
-    M, k = idx.shape
-    keep = np.zeros(M, dtype=np.bool_)
-    cen = np.zeros((M, 3))
-    n1 = np.zeros((M, 3))
-    n2 = np.zeros((M, 3))
+    Writes rows m of keep (M,), centroid (M × 3), n1 (M × 3), n2 (M × 3; lines only)."""
+    k = idx.shape[1]
     C = np.zeros((3, 3))
     v = np.zeros(3)
-    for m in range(M):
+    for m in rows:
+        keep[m] = False
         if not ok[m]:
             continue
         cx = cy = cz = 0.0
@@ -324,83 +342,134 @@ def _fit_kernel(pts, idx, ok, line, ratio, spread2, threshold):
             n1[m, 0], n1[m, 1], n1[m, 2] = v[0], v[1], v[2]
         keep[m] = True
         cen[m, 0], cen[m, 1], cen[m, 2] = cx, cy, cz
-    return keep, cen, n1, n2
+
+
+class _Neighbourhoods:
+    """One feature type's k-NN answers and fits over a stage's iterations: a point that moved
+    less than its answer's tolerance (:meth:`VoxelMap.knn_update`) keeps them, exactly."""
+
+    def __init__(self, m: int, k: int):
+        self.anchor = np.zeros((m, 3))
+        self.tau = np.full(m, -1.0)  # < 0: never searched
+        self.idx = np.zeros((m, k), dtype=np.int64)
+        self.ok = np.zeros(m, dtype=np.bool_)
+        self.keep = np.zeros(m, dtype=np.bool_)
+        self.cen = np.zeros((m, 3))
+        self.n1 = np.zeros((m, 3))
+        self.n2 = np.zeros((m, 3))
 
 
 def fit_neighbourhoods(
-    tree: cKDTree,
-    pts: np.ndarray,
+    fmap: VoxelMap,
     q: np.ndarray,
     k: int,
     radius: float,
     line: bool,
     params: "RegistrationParams",
+    state: _Neighbourhoods | None = None,
 ):
-    """The query points q (M × 3) whose k nearest map points (``tree`` over ``pts``) all lie
-    within ``radius`` and fit a line (``line``) or a plane (module doc): (rows (K,), centroids
-    (K × 3), normals (K × 3), second normals (K × 3, lines only))."""
-    if len(pts) < k or len(q) == 0:
+    """The query points q (M × 3) whose k nearest map points (edges if ``line``, else planes)
+    all lie within ``radius`` and fit a line (``line``) or a plane (module doc): (rows (K,),
+    centroids (K × 3), normals (K × 3), second normals (K × 3, lines only)). state: kept over
+    the iterations of one stage on an unchanged map, to re-search only the points that moved
+    (``params.reuse_margin``)."""
+    if len(q) == 0:
         z = np.zeros((0, 3))
         return np.zeros(0, int), z, z, z
-    d, idx = tree.query(q, k=k, distance_upper_bound=radius, workers=1)
-    idx = np.asarray(idx, dtype=np.int64).reshape(len(q), k)
-    ok = np.isfinite(np.asarray(d).reshape(len(q), k)[:, -1])
-    keep, cen, n1, n2 = _fit_kernel(
-        np.ascontiguousarray(pts, dtype=float), idx, ok, line,
+    q = np.ascontiguousarray(q, dtype=float)
+    st = state if state is not None else _Neighbourhoods(len(q), k)
+    moved = np.einsum("ij,ij->i", q - st.anchor, q - st.anchor)
+    rows = np.flatnonzero((st.tau < 0) | (moved >= st.tau * np.abs(st.tau)))
+    fmap.knn_update(line, q, rows, k, radius, params.reuse_margin, st.idx, st.ok, st.tau)
+    st.anchor[rows] = q[rows]
+    _fit_kernel(
+        fmap.table(line), st.idx, st.ok, rows, line,
         float(params.line_ratio), float(params.plane_spread) ** 2, float(params.plane_threshold),
+        st.keep, st.cen, st.n1, st.n2,
     )  # fmt: skip
-    rows = np.flatnonzero(keep)
-    return rows, cen[rows], n1[rows], n2[rows]
+    out = np.flatnonzero(st.keep)
+    return out, st.cen[out], st.n1[out], st.n2[out]
 
 
 def _associate(
-    fmap: FeatureMap, edges: np.ndarray, planes: np.ndarray, T: np.ndarray, params, radius
+    fmap: VoxelMap, edges: np.ndarray, planes: np.ndarray, T: np.ndarray, params, radius, states
 ) -> _Rows:
     k = params.k_neighbours
     # Edges: line-like neighbourhoods; residual rows along two directions ⊥ the line.
     i_e, c_e, a_e, b_e = fit_neighbourhoods(
-        fmap.edge_tree, fmap.edge_points, transform_points(T, edges), k, radius, True, params
+        fmap, transform_points(T, edges), k, radius, True, params, states[0]
     )
-    ne = len(i_e)
     # Planes: spread in two directions, every neighbour within plane_threshold of the plane.
     i_p, c_p, n_p, _ = fit_neighbourhoods(
-        fmap.planar_tree, fmap.planar_points, transform_points(T, planes), k, radius, False, params
+        fmap, transform_points(T, planes), k, radius, False, params, states[1]
     )
-    npl = len(i_p)
-    p = np.concatenate([edges[i_e], edges[i_e], planes[i_p]])
-    n = np.concatenate([a_e, b_e, n_p])
-    m = np.concatenate([c_e, c_e, c_p])
-    group = np.concatenate([np.arange(ne), np.arange(ne), ne + np.arange(npl)])
-    return _Rows(p, n, m, group, ne + npl, ne, npl)
+    return _Rows(
+        p=np.concatenate([edges[i_e], planes[i_p]]),
+        n1=np.concatenate([a_e, n_p]),
+        n2=np.concatenate([b_e, np.zeros_like(n_p)]),
+        m=np.concatenate([c_e, c_p]),
+        n_edge=len(i_e),
+        n_planar=len(i_p),
+    )
 
 
-def _residuals(rows: _Rows, T: np.ndarray) -> np.ndarray:
-    q = transform_points(T, rows.p)
-    return np.einsum("ki,ki->k", rows.n, q - rows.m)
+@njit(cache=True)
+def _gn_kernel(p, n1, n2, m, T, delta, with_h):
+    """Huber cost Σ ρ(d) of the correspondences at pose T and, if ``with_h``, the IRLS normal
+    equations H = Σ w JᵀJ, g = Σ w Jᵀr (w = ρ'(d)/d per correspondence, shared by its rows),
+    J = [(p × Rᵀn)ᵀ, (Rᵀn)ᵀ] per row (module doc). Returns (H (6 × 6), g (6,), cost)."""
+    H = np.zeros((6, 6))
+    g = np.zeros(6)
+    J = np.zeros(6)
+    cost = 0.0
+    R = T[:3, :3]
+    for i in range(len(p)):
+        px, py, pz = p[i, 0], p[i, 1], p[i, 2]
+        qx = R[0, 0] * px + R[0, 1] * py + R[0, 2] * pz + T[0, 3] - m[i, 0]
+        qy = R[1, 0] * px + R[1, 1] * py + R[1, 2] * pz + T[1, 3] - m[i, 1]
+        qz = R[2, 0] * px + R[2, 1] * py + R[2, 2] * pz + T[2, 3] - m[i, 2]
+        r1 = n1[i, 0] * qx + n1[i, 1] * qy + n1[i, 2] * qz
+        r2 = n2[i, 0] * qx + n2[i, 1] * qy + n2[i, 2] * qz
+        d = np.sqrt(r1 * r1 + r2 * r2)
+        if d <= delta:
+            cost += 0.5 * d * d
+            w = 1.0
+        else:
+            cost += delta * (d - 0.5 * delta)
+            w = delta / d
+        if not with_h:
+            continue
+        for row in range(2):
+            if row == 0:
+                nx, ny, nz, r = n1[i, 0], n1[i, 1], n1[i, 2], r1
+            else:
+                nx, ny, nz, r = n2[i, 0], n2[i, 1], n2[i, 2], r2
+                if nx == 0.0 and ny == 0.0 and nz == 0.0:
+                    continue  # a plane: one row
+            bx = R[0, 0] * nx + R[1, 0] * ny + R[2, 0] * nz  # Rᵀn
+            by = R[0, 1] * nx + R[1, 1] * ny + R[2, 1] * nz
+            bz = R[0, 2] * nx + R[1, 2] * ny + R[2, 2] * nz
+            J[0], J[1], J[2] = py * bz - pz * by, pz * bx - px * bz, px * by - py * bx
+            J[3], J[4], J[5] = bx, by, bz
+            for a in range(6):
+                wa = w * J[a]
+                g[a] += wa * r
+                for b in range(a, 6):
+                    H[a, b] += wa * J[b]
+    for a in range(6):
+        for b in range(a):
+            H[a, b] = H[b, a]
+    return H, g, cost
 
 
-def _distances(rows: _Rows, r: np.ndarray) -> np.ndarray:
-    """Per-correspondence distance d (point-to-line or point-to-plane) [m]."""
-    return np.sqrt(np.bincount(rows.group, r * r, minlength=rows.n_groups))
-
-
-def _huber(d: np.ndarray, delta: float) -> tuple[np.ndarray, np.ndarray]:
-    """Huber loss ρ(d) and IRLS weight w(d) = ρ'(d)/d."""
-    small = d <= delta
-    rho = np.where(small, 0.5 * d * d, delta * (d - 0.5 * delta))
-    w = np.where(small, 1.0, delta / np.maximum(d, 1e-300))
-    return rho, w
-
-
-def _normal_equations(rows: _Rows, T: np.ndarray, delta: float):
-    r = _residuals(rows, T)
-    d = _distances(rows, r)
-    rho, w_group = _huber(d, delta)
-    w = w_group[rows.group]
-    nb = rows.n @ T[:3, :3]  # Rᵀn per row
-    J = np.hstack([np.cross(rows.p, nb), nb])  # (K × 6)
-    Jw = J * w[:, None]
-    return Jw.T @ J, Jw.T @ r, float(rho.sum()), r, w
+def _row_statistics(rows: _Rows, T: np.ndarray, delta: float):
+    """(Σ w r² over the rows, distances d per correspondence) at T."""
+    q = transform_points(T, rows.p) - rows.m
+    r1 = np.einsum("ki,ki->k", rows.n1, q)
+    r2 = np.einsum("ki,ki->k", rows.n2, q)
+    d = np.sqrt(r1 * r1 + r2 * r2)
+    w = np.where(d <= delta, 1.0, delta / np.maximum(d, 1e-300))  # Huber IRLS weight
+    return float(np.sum(w * d * d)), d
 
 
 def _degenerate_projector(H: np.ndarray, threshold: float):
@@ -417,18 +486,62 @@ def _settled(T: np.ndarray, previous: list[np.ndarray], prm: RegistrationParams)
     (seen on canal_survey: 10 % of matches ran all 30 iterations alternating ~1 mm / 0.007°),
     and iterating further only revisits them."""
     for P in previous:
-        step = np.linalg.inv(P) @ T
-        w_step = np.arccos(np.clip((np.trace(step[:3, :3]) - 1) / 2, -1.0, 1.0))
-        if w_step < prm.rotation_tolerance and np.linalg.norm(step[:3, 3]) < (
+        R_step = P[:3, :3].T @ T[:3, :3]  # P⁻¹ T of rigid motions, without a general inverse
+        w_step = np.arccos(np.clip((np.trace(R_step) - 1) / 2, -1.0, 1.0))
+        if w_step < prm.rotation_tolerance and np.linalg.norm(T[:3, 3] - P[:3, 3]) < (
             prm.translation_tolerance
         ):
             return True
     return False
 
 
+def _lm_steps(rows: _Rows, T: np.ndarray, prm: RegistrationParams) -> np.ndarray:
+    """``inner_steps`` Levenberg-Marquardt steps on fixed correspondences (module doc)."""
+    return _lm_kernel(
+        rows.p, rows.n1, rows.n2, rows.m, np.ascontiguousarray(T, dtype=float),
+        float(prm.huber_delta), int(prm.inner_steps), float(prm.initial_damping),
+        float(prm.degeneracy_threshold),
+    )  # fmt: skip
+
+
+@njit(cache=True)
+def _lm_kernel(p, n1, n2, m, T, delta, inner_steps, damping, threshold):
+    """:func:`_lm_steps` in one call: λ-damped steps ξ = −P (H + λ diag H)⁻¹ g, P the projector
+    off H's degenerate directions (Zhang 2016), accepted when the Huber cost does not grow
+    (then λ /= 3, else λ *= 4), T ← T · (Exp(ω), v)."""
+    lam = damping
+    H, g, cost = _gn_kernel(p, n1, n2, m, T, delta, True)
+    evals, evecs = np.linalg.eigh(H)
+    P = np.zeros((6, 6))
+    for j in range(6):
+        if evals[j] >= threshold:
+            P += np.outer(evecs[:, j], evecs[:, j])
+    for _ in range(inner_steps):
+        accepted = False
+        while not accepted and lam < 1e8:
+            A = H + lam * np.diag(np.diag(H))
+            try:
+                xi = -P @ np.linalg.solve(A, g)
+            except Exception:  # numba catches no narrower class (a singular A)
+                xi = -P @ np.linalg.lstsq(A, g)[0]
+            R = np.ascontiguousarray(T[:3, :3])
+            T_new = T.copy()
+            T_new[:3, :3] = R @ so3_exp(np.ascontiguousarray(xi[:3]))
+            T_new[:3, 3] = T[:3, 3] + R @ np.ascontiguousarray(xi[3:])
+            if _gn_kernel(p, n1, n2, m, T_new, delta, False)[2] <= cost:
+                T, accepted = T_new, True
+                lam = max(lam / 3.0, 1e-12)
+            else:
+                lam *= 4.0
+        if not accepted:
+            break
+        H, g, cost = _gn_kernel(p, n1, n2, m, T, delta, True)
+    return T
+
+
 def register_scan(
     source: LidarFeatures,
-    feature_map: FeatureMap,
+    feature_map: VoxelMap,
     T_init: np.ndarray | None = None,
     params: RegistrationParams | None = None,
 ) -> RegistrationResult:
@@ -440,44 +553,22 @@ def register_scan(
     ξ = (ω, v) (body frame, right perturbation) and the degeneracy indicator."""
     prm = params or RegistrationParams()
     T = np.eye(4) if T_init is None else np.array(T_init, dtype=float)
-    edges = voxel_downsample(source.edge_points, prm.source_edge_voxel)
-    planes = voxel_downsample(source.planar_points, prm.source_planar_voxel)
+    edges = voxel_filter(source.edge_points, prm.source_edge_voxel)
+    planes = voxel_filter(source.planar_points, prm.source_planar_voxel)
     iterations, converged = 0, False
     rows = None
-    H = np.zeros((6, 6))
     for radius in prm.max_correspondence_distances:
         converged = False
         history: list[np.ndarray] = []  # poses at the start of each outer iteration
+        k = prm.k_neighbours
+        states = (_Neighbourhoods(len(edges), k), _Neighbourhoods(len(planes), k))
         for _ in range(prm.max_iterations):
             iterations += 1
-            rows = _associate(feature_map, edges, planes, T, prm, radius)
+            rows = _associate(feature_map, edges, planes, T, prm, radius, states)
             if rows.n_groups < 6:
                 break
-            T_start = T
-            lam = prm.initial_damping
-            H, g, cost, _, _ = _normal_equations(rows, T, prm.huber_delta)
-            P, _, _ = _degenerate_projector(H, prm.degeneracy_threshold)
-            for _ in range(prm.inner_steps):
-                accepted = False
-                while not accepted and lam < 1e8:
-                    A = H + lam * np.diag(np.diag(H))
-                    try:
-                        xi = -P @ np.linalg.solve(A, g)
-                    except np.linalg.LinAlgError:
-                        xi = -P @ np.linalg.lstsq(A, g, rcond=None)[0]
-                    T_new = retract(T, xi)
-                    new_cost = float(
-                        _huber(_distances(rows, _residuals(rows, T_new)), prm.huber_delta)[0].sum()
-                    )
-                    if new_cost <= cost:
-                        T, accepted = T_new, True
-                        lam = max(lam / 3.0, 1e-12)
-                    else:
-                        lam *= 4.0
-                if not accepted:
-                    break
-                H, g, cost, _, _ = _normal_equations(rows, T, prm.huber_delta)
-            history.append(T_start)
+            history.append(T)
+            T = _lm_steps(rows, T, prm)
             if _settled(T, history[-prm.cycle_length :], prm):
                 converged = True
                 break
@@ -485,11 +576,11 @@ def register_scan(
         nan6 = np.full((6, 6), np.nan)
         return RegistrationResult(T, iterations, False, np.zeros((6, 6)), nan6, 0.0, True, 0, 0,
                                   np.nan, np.nan)  # fmt: skip
-    H, _, _, r, w = _normal_equations(rows, T, prm.huber_delta)
+    H, _, _ = _gn_kernel(rows.p, rows.n1, rows.n2, rows.m, T, float(prm.huber_delta), True)
     _, min_eig, degenerate = _degenerate_projector(H, prm.degeneracy_threshold)
-    dof = max(len(r) - 6, 1)
-    sigma2 = float(np.sum(w * r * r) / dof)
-    d = _distances(rows, r)
+    dof = max(rows.n_rows - 6, 1)
+    wr2, d = _row_statistics(rows, T, prm.huber_delta)
+    sigma2 = wr2 / dof
     cov = sigma2 * np.linalg.pinv(H)
     return RegistrationResult(
         T=T,
