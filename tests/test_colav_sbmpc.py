@@ -165,3 +165,48 @@ def test_no_behaviour_heads_to_port_of_the_route_before_a_head_on_cpa():
     commanded = route + np.radians(30.0) + d.course_offset
     assert np.degrees(commanded - route) <= SbmpcParams().port_limit_deg + 1e-9
     assert d.encounter_open
+
+
+def _gw_crossing_track(position):
+    """Track 5: a 12 kn target heading west, crossing from our starboard (give-way crossing)."""
+    return Track(
+        5, 0.0, np.asarray(position, float), np.array([-12.0 * KNOT, 0.0]), np.eye(4), 0, 3
+    )
+
+
+@pytest.mark.parametrize("hold", [True, False])
+def test_port_limit_holds_until_the_target_is_past_and_clear_on_the_return_course(hold):
+    route = NORTH
+    s = Sbmpc(SbmpcParams(hold_until_clear=hold))
+    d = s.decide(
+        [0.0, 0.0], NORTH, U, NORTH, U, [_gw_crossing_track([NMI, NMI])], path_course=route
+    )
+    assert s.roles[5][1]  # give-way crossing from the first geometry
+    # later: we are 30° to starboard of the route, the target is past its CPA on this course but
+    # ahead of it on the guidance's return course (30° to port of the route): not yet clear
+    tr = _gw_crossing_track([-1000.0, 1500.0])
+    d = s.decide([0.0, 0.0], route - np.radians(30.0), U, route + np.radians(30.0), U, [tr],
+                 path_course=route)  # fmt: skip
+    port = np.degrees(route + np.radians(30.0) + d.course_offset - route)
+    if hold:
+        assert port <= SbmpcParams().port_limit_deg + 1e-9
+        assert not s.duties[5][1]
+    else:  # the older rule keeps no per-track duties
+        assert s.duties == {}
+    if hold:  # past on both courses: cleared (latched), the return to the route is free
+        far = _gw_crossing_track([-2500.0, 1000.0])
+        s.decide([0.0, 0.0], route, U, route + np.radians(30.0), U, [far], path_course=route)
+        assert s.duties[5][1]
+
+
+def test_an_unreleased_stand_on_ship_keeps_the_route_course():
+    # a crossing target from port, far off: stand-on, not released; the ship is left of its route
+    # so the guidance's LOS course points 30° to starboard of it: keep the route's course instead
+    route = NORTH
+    s = Sbmpc(SbmpcParams(hold_until_clear=True))
+    tr = Track(6, 0.0, np.array([-3.0 * NMI, 3.0 * NMI]), np.array([12.0 * KNOT, 0.0]),
+               np.eye(4), 0, 3)  # fmt: skip
+    d = s.decide([0.0, 0.0], route, U, route - np.radians(30.0), U, [tr], path_course=route)
+    assert s.roles[6][2] and 6 not in s.released
+    heading = np.degrees(route - np.radians(30.0) + d.course_offset - route)
+    assert abs(heading) <= SbmpcParams().port_limit_deg + 1e-9

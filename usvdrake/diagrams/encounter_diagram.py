@@ -71,10 +71,15 @@ class EncounterConfig:
     # own): capping it at 8° raised COLREG compliance a little but doubled some paths and cut
     # arrivals (docs/experiments/colav-tuning.md)
     max_return_deg: float | None = None
+    # within this many LOS lookaheads of the route's end no stand-on duty holds the own ship off
+    # its route (``SbmpcColav.end_release``; None: always held)
+    end_release_lookaheads: float | None = 4.0
     arrival_radius_m: float = 150.0  # the route is done this close to its end (evaluation: 200)
     length_scale: float = 1.0  # k of a Froude-scaled situation (1: the situation as written)
     # SB-MPC roles from DNV's sectors, as the evaluation classifies (``SbmpcParams.sector_roles``)
     sector_roles: bool = False
+    # SB-MPC holds its duties until the target is past and clear (``SbmpcParams.hold_until_clear``)
+    hold_until_clear: bool = False
 
     def froude_scaled(self, k: float) -> "EncounterConfig":
         """Distances × k, times × √k (``scaling.froude_scaled``); AIS sampling unchanged (the
@@ -206,12 +211,13 @@ def build_encounter_diagram(
     ais = b.AddNamedSystem(
         "ais_transponders", AisTransponders(targets.ids, cfg.seed, noise, cfg.ais_period_s)
     )
+    lookahead = max(cfg.lookahead_lengths * length, cfg.min_lookahead_m)
     guidance = b.AddNamedSystem(
         "route_guidance",
         RouteGuidance(
             route.xy,
             route.leg_speeds,
-            lookahead=max(cfg.lookahead_lengths * length, cfg.min_lookahead_m),
+            lookahead=lookahead,
             switch_radius=cfg.switch_lengths * length,
             arrival_radius=cfg.arrival_radius_m,
         ),
@@ -222,9 +228,13 @@ def build_encounter_diagram(
     colav = b.AddNamedSystem(
         "sbmpc_colav",
         SbmpcColav(
-            sbmpc or dataclasses.replace(params, sector_roles=cfg.sector_roles),
+            sbmpc
+            or dataclasses.replace(
+                params, sector_roles=cfg.sector_roles, hold_until_clear=cfg.hold_until_clear
+            ),
             cfg.colav_period_s,
             None if cfg.max_return_deg is None else np.radians(cfg.max_return_deg),
+            None if cfg.end_release_lookaheads is None else cfg.end_release_lookaheads * lookahead,
         ),
     )
     b.Connect(targets.GetOutputPort("target_states"), ais.GetInputPort("target_states"))
@@ -233,6 +243,7 @@ def build_encounter_diagram(
     b.Connect(state, colav.GetInputPort("state"))
     b.Connect(guidance.GetOutputPort("nominal"), colav.GetInputPort("nominal"))
     b.Connect(guidance.GetOutputPort("path_course"), colav.GetInputPort("path_course"))
+    b.Connect(guidance.GetOutputPort("distance_to_end"), colav.GetInputPort("distance_to_end"))
     b.Connect(tracker.GetOutputPort("tracks"), colav.GetInputPort("tracks"))
     b.Connect(colav.GetOutputPort("command"), command)
     b.ExportOutput(state, "own_state")

@@ -18,9 +18,11 @@ class RouteGuidance(LeafSystem):
         - nominal
         - mission_complete
         - path_course
+        - distance_to_end
 
     ``state`` = [x y ψ u v r]; ``nominal`` = [course [rad], speed [m/s]]; ``path_course`` =
-    [the active leg's direction [rad]];
+    [the active leg's direction [rad]]; ``distance_to_end`` = [straight-line distance to the
+    route's last waypoint [m]];
     ``mission_complete`` = [1] within ``arrival_radius`` of the last waypoint. The active leg
     lives in discrete state (advanced every ``period``); the outputs advance it afresh from the
     present position, so they never lag a leg behind.
@@ -50,6 +52,8 @@ class RouteGuidance(LeafSystem):
         self.DeclareVectorOutputPort("nominal", 2, self._calc_nominal, deps)
         self.DeclareVectorOutputPort("mission_complete", 1, self._calc_complete, deps)
         self.DeclareVectorOutputPort("path_course", 1, self._calc_path_course, deps)
+        state_dep = {self.input_port_ticket(self._state.get_index())}
+        self.DeclareVectorOutputPort("distance_to_end", 1, self._calc_to_end, state_dep)
 
     def _index(self, context) -> int:
         start = int(context.get_discrete_state(self._leg).GetAtIndex(0))
@@ -68,6 +72,10 @@ class RouteGuidance(LeafSystem):
     def _calc_path_course(self, context, output):
         _, e, _ = leg_frame(self._wps, min(self._index(context), len(self._wps) - 2))
         output.SetFromVector([float(np.arctan2(e[1], e[0]))])
+
+    def _calc_to_end(self, context, output):
+        pos = self._state.Eval(context)[:2]
+        output.SetFromVector([float(np.hypot(*(pos - self._wps[-1])))])
 
     def _calc_complete(self, context, output):
         pos = self._state.Eval(context)[:2]

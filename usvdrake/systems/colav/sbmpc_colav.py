@@ -27,6 +27,7 @@ class SbmpcColav(LeafSystem):
         - state
         - nominal
         - path_course (optional)
+        - distance_to_end (optional)
         - tracks
         output_ports:
         - command
@@ -37,8 +38,11 @@ class SbmpcColav(LeafSystem):
     ``command`` = [course [rad], speed [m/s]]; ``colav_diagnostics`` = [offset [rad], factor,
     cost, min_predicted_distance [m], active, decide_ms, decisions, encounter_open]. While an
     encounter is open the guidance's pull back to the route (``path_course``, optional) is at
-    most ``max_return`` [rad]. The ``Sbmpc`` (last choice,
-    remembered COLREG roles) is abstract state; the last decision is discrete state.
+    most ``max_return`` [rad]. Within ``end_release`` [m] of the route's end
+    (``distance_to_end``, optional) no stand-on duty bounds the course (``Sbmpc.decide``'s
+    ``hold_stand_on``): a stand-on ship held off its route there would miss its end. The
+    ``Sbmpc`` (last choice, remembered COLREG roles) is abstract state; the last decision is
+    discrete state.
     """
 
     def __init__(
@@ -46,6 +50,7 @@ class SbmpcColav(LeafSystem):
         params: SbmpcParams | None = None,
         period: float = 5.0,
         max_return: float | None = None,
+        end_release: float | None = None,
     ):
         super().__init__()
         if not period > 0.0:
@@ -54,6 +59,8 @@ class SbmpcColav(LeafSystem):
         self._nominal = self.DeclareVectorInputPort("nominal", 2)
         self._path = self.DeclareVectorInputPort("path_course", 1)
         self._max_return = max_return
+        self._to_end = self.DeclareVectorInputPort("distance_to_end", 1)
+        self._end_release = end_release
         self._tracks = self.DeclareAbstractInputPort("tracks", AbstractValue.Make([]))
         self._sbmpc = self.DeclareAbstractState(AbstractValue.Make(Sbmpc(params)))
         initial = np.array([0.0, 1.0, 0.0, np.inf, 0.0, 0.0, 0.0, 0.0])
@@ -74,11 +81,16 @@ class SbmpcColav(LeafSystem):
         vx, vy = u * c - v * s, u * s + v * c  # velocity over ground: SB-MPC works in courses
         sbmpc = state.get_mutable_abstract_state(self._sbmpc).get_value()
         path = float(self._path.Eval(context)[0]) if self._path.HasValue(context) else None
+        hold = not (
+            self._end_release is not None
+            and self._to_end.HasValue(context)
+            and self._to_end.Eval(context)[0] < self._end_release
+        )
         t0 = time.perf_counter()
         d = sbmpc.decide(
             [x, y], float(np.arctan2(vy, vx)), float(np.hypot(vx, vy)), float(course_ref),
             float(speed_ref), self._tracks.Eval(context),
-            path_course=path,
+            path_course=path, hold_stand_on=hold,
         )  # fmt: skip
         ms = 1e3 * (time.perf_counter() - t0)
         count = context.get_discrete_state(self._diag).GetAtIndex(6) + 1.0
