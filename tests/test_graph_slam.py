@@ -928,3 +928,54 @@ def test_lidar_slam_system_takes_odometry_on_its_optional_port():
         np.testing.assert_allclose(pose, [2.9, 0.0, 0.29], atol=0.02)
     assert "odometry" not in kinds[False] and kinds[True].count("odometry") >= 2
     assert not HectorSlam(HectorConfig(), (0, 0, 0), mount, 0.1).HasInputPort("odometry")
+
+
+def test_the_odometry_centres_a_small_tracking_search():
+    """Steps alternating 0.1 m straight on and 0.9 m with a 0.5 rad turn (a log whose scans
+    drop out): the constant-velocity guess is 0.8 m and 0.5 rad off every other scan, beyond a
+    ±0.2 m / ±0.1 rad search about it, and tracking loses the motion. With
+    ``odometry_search_window`` the same small search is centred on the odometry's guess (here
+    5 cm off the truth every other step) and finds every step."""
+    x = np.cumsum([0.0] + [0.1, 0.9] * 6) - 3.0
+    th = np.cumsum([0.0] + [0.0, 0.5] * 6)
+    poses = [np.array([xi, 0.5, t]) for xi, t in zip(x, th, strict=True)]
+    odometry = [
+        np.array([xi + 0.05 * (k % 2), 0.0, t]) for k, (xi, t) in enumerate(zip(x, th, strict=True))
+    ]
+    cfg = GraphSlamConfig(
+        correlative_trigger=0.0,  # every scan searched
+        search_linear_window=0.2,
+        search_angular_window=0.1,
+        node_translation=0.05,
+        odometry_gate=-1.0,  # every odometry constraint gated out: the search alone
+        map_size=[20.0, 20.0],
+        map_origin=[-10.0, -10.0],
+    )
+    plain = _drive(ROOM, poses, odometry, cfg, max_range=30.0)[1]
+    cfg = replace(cfg, odometry_search_window=[0.2, 0.1])
+    slam, est = _drive(ROOM, poses, odometry, cfg, max_range=30.0)
+    assert np.hypot(*(plain[:2] - poses[-1][:2])) > 1.0
+    assert np.hypot(*(est[:2] - poses[-1][:2])) < 0.01
+    assert not [c for c in slam.constraints if c.kind == "odometry"]
+    assert slam.stats["odometry_rejected"] >= 1
+
+
+def test_loop_spacing_lets_only_nodes_that_far_apart_look_for_loops():
+    """Twice around a 2.5 m circle in the cluttered room (a node every scan, 0.26 m apart): with
+    ``loop_spacing`` 1 m the nodes that look for loops are at least a metre of the graph apart
+    (and the first node of the second lap that looks still closes one); without it every
+    node looks."""
+    a = np.linspace(0.0, 4 * np.pi, 121)
+    poses = [np.array([1 + 2.5 * np.cos(t), 2.5 * np.sin(t), t + np.pi / 2]) for t in a]
+    cfg = GraphSlamConfig(
+        node_translation=0.15, loop_index_gap=20, map_size=[30.0, 20.0], map_origin=[-15.0, -10.0]
+    )
+    every = _drive(ROOM, poses, cfg=cfg, max_range=30.0)[0]
+    spaced = _drive(ROOM, poses, cfg=replace(cfg, loop_spacing=1.0), max_range=30.0)[0]
+    assert len(spaced.nodes) == len(every.nodes)  # the scans alone make the nodes
+    closing = sorted({c.j for c in spaced.constraints if c.kind == "loop"})
+    closing_every = sorted({c.j for c in every.constraints if c.kind == "loop"})
+    assert 3 <= len(closing) < len(closing_every) / 3
+    est = spaced.trajectory()
+    path = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(est[:, :2], axis=0).T))])
+    assert np.all(np.diff(path[closing]) >= 1.0 - 0.05)

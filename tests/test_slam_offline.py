@@ -3,6 +3,7 @@
 import bz2
 import gzip
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +18,7 @@ from usvdrake.analysis.trajectory_metrics import (
 )
 from usvdrake.cli import main
 from usvdrake.logs.carmen import read_poses
+from usvdrake.run.slam2d import LOG_CONFIG, replay_lag, run_slam2d
 
 LOG = Path(__file__).parent / "data" / "carmen" / "intel-first200.clf.bz2"
 
@@ -45,7 +47,8 @@ def test_slam2d_cli_runs_a_real_log_piece(tmp_path):
     # --inline: solved in this process as they start, nothing waited for (the solves are in
     # the wall time instead); the same nodes (made by the motion between scans alone)
     inline = tmp_path / "inline"
-    assert main(["slam2d", str(LOG), "--out", str(inline), "--quiet", "--inline"]) == 0
+    args = ["slam2d", str(LOG), "--out", str(inline), "--quiet", "--inline", "--scan-only"]
+    assert main(args) == 0
     here = json.loads((inline / "metrics.json").read_text())
     assert not here["full_in_worker"] and here["full_wait_s"] < 0.01
     assert here["full_optimisation_s"] < here["wall_time_s"]
@@ -53,8 +56,6 @@ def test_slam2d_cli_runs_a_real_log_piece(tmp_path):
 
 
 def test_replay_lag_queues_scans_behind_slow_ones():
-    from usvdrake.run.slam2d import replay_lag
-
     # arrivals 0, 1, 2, 2, 3 (the fourth, stamped back in time, counts as arriving at 2); a
     # 2.5 s step on the second delays all after it: they end at 0.5, 3.5, 4.0, 4.5, 5.0
     lag = replay_lag([0.0, 1.0, 2.0, 1.5, 3.0], [0.5, 2.5, 0.5, 0.5, 0.5])
@@ -114,17 +115,23 @@ def test_slam2d_relink_links_the_final_estimate_and_refuses_a_negative_radius(tm
     assert "--relink" in capsys.readouterr().err
 
 
-def test_slam2d_odometry_ties_the_nodes_by_the_logs_wheel_odometry(tmp_path, capsys):
-    """``--odometry``: the raw log's odometry (its FLASER pose fields) ties the nodes (every
-    metre it went) beside the scans; the metrics say so and give the calibration the scans
-    made of it (1 until the odometry has gone 5 m over well-measured steps). The scan-only run
-    has none of those constraints; a bag has no odometry to read: a one-line error."""
-    plain, odo = tmp_path / "plain", tmp_path / "odo"
-    assert main(["slam2d", str(LOG), "--out", str(plain), "--quiet"]) == 0
-    assert main(["slam2d", str(LOG), "--out", str(odo), "--quiet", "--odometry"]) == 0
-    without = json.loads((plain / "metrics.json").read_text())
+def test_slam2d_uses_the_logs_wheel_odometry_by_default(tmp_path):
+    """A raw log's odometry (its FLASER pose fields) ties the nodes (every metre it went)
+    beside the scans by default; the metrics and the summary say so and give the calibration
+    the scans made of it (1 until the odometry has gone 5 m over well-measured steps).
+    ``--scan-only`` has none of those constraints; ``--odometry`` (the old switch) is the
+    default."""
+    plain, odo, old = tmp_path / "plain", tmp_path / "odo", tmp_path / "old"
+    assert main(["slam2d", str(LOG), "--out", str(plain), "--quiet", "--scan-only"]) == 0
+    assert main(["slam2d", str(LOG), "--out", str(odo), "--quiet"]) == 0
+    assert main(["slam2d", str(LOG), "--out", str(old), "--quiet", "--odometry"]) == 0
+    scan_only = json.loads((plain / "metrics.json").read_text())
+    assert scan_only["odometry"] is False and scan_only["odometry_scale"] is None
+    assert scan_only["motion_prior"] == "scan-only (--scan-only)"
+    assert scan_only["odometry_constraints"] == 0
+    # the same configuration without the odometry (a CARMEN log runs LOG_CONFIG either way)
+    without = run_slam2d(LOG, tmp_path / "same", progress=False, config=LOG_CONFIG, odometry=False)
     metrics = json.loads((odo / "metrics.json").read_text())
-    assert without["odometry"] is False and without["odometry_scale"] is None
     assert metrics["odometry"] is True and len(metrics["odometry_scale"]) == 2
     assert all(0.5 < k < 2.0 for k in metrics["odometry_scale"])
     assert metrics["slam_nodes"] == without["slam_nodes"]  # the scans alone make the nodes
@@ -133,12 +140,74 @@ def test_slam2d_odometry_ties_the_nodes_by_the_logs_wheel_odometry(tmp_path, cap
     added = metrics["slam_constraints"] - without["slam_constraints"]
     assert metrics["odometry_constraints"] == added > 0 and without["odometry_constraints"] == 0
     assert without["odometry_rejected"] == 0  # scan-only: nothing to gate
+    assert metrics["motion_prior"] == (
+        f"wheel odometry ({added} constraints, {metrics['odometry_rejected']} gated out)"
+    )
+    again = json.loads((old / "metrics.json").read_text())
+    assert again["motion_prior"] == metrics["motion_prior"]
+    # --fast: LOG_ODOMETRY_CONFIG, a node every 0.15 m instead of every 5 cm
+    fast = run_slam2d(LOG, tmp_path / "fast", progress=False, fast=True)
+    assert fast["odometry"] is True and fast["slam_nodes"] < metrics["slam_nodes"]
     t, xyz, _ = read_tum(odo / "trajectory.tum")
     assert len(t) == 200 and np.all(np.isfinite(xyz))
-    bag = tmp_path / "room.bag"
-    write_bag(bag)
-    assert main(["slam2d", str(bag), "--out", str(tmp_path / "b"), "--quiet", "--odometry"]) == 2
-    assert "CARMEN" in capsys.readouterr().err
+
+
+def test_slam2d_reads_no_odometry_from_a_corrected_log_or_a_log_without_it(tmp_path, capsys):
+    """A corrected log's pose fields are its reference (the scan matcher's NEFF lines say it
+    is one), and so are a log's own when it is its reference; a log whose pose fields never
+    move has no odometry. Each runs scan-only, and the one-screen summary says why."""
+    lines = list(bz2.open(LOG, "rt"))
+    corrected = tmp_path / "corrected.log"
+    corrected.write_text("".join(lines[:120]) + "NEFF 30.0 0.0 pippo 0.0\n")
+    still = tmp_path / "still.clf"
+    flaser = [ln.split() for ln in lines if ln.startswith("FLASER")][:60]
+    for tokens in flaser:
+        n = int(tokens[1])
+        tokens[2 + n : 8 + n] = ["0"] * 6  # no odometer: every pose 0 0 0
+    still.write_text("".join(" ".join(tokens) + "\n" for tokens in flaser))
+    cases = [
+        (corrected, [], "scan-only (a corrected log: its poses are the reference)"),
+        (
+            LOG,
+            ["--reference", str(LOG)],
+            "scan-only (a corrected log: its poses are the reference)",
+        ),
+        (still, [], "scan-only (log has no odometry)"),
+    ]
+    for k, (log, extra, prior) in enumerate(cases):
+        out = tmp_path / f"run{k}"
+        capsys.readouterr()
+        assert main(["slam2d", str(log), "--out", str(out), "--quiet", *extra]) == 0
+        metrics = json.loads((out / "metrics.json").read_text())
+        assert metrics["motion_prior"] == prior and metrics["odometry"] is False
+        assert metrics["odometry_constraints"] == 0
+        assert re.search(r"motion_prior +" + re.escape(prior), capsys.readouterr().out)
+
+
+def test_bag_odometry_is_read_interpolated_and_used(tmp_path):
+    """A bag's /odom (nav_msgs/Odometry) is interpolated to each scan's time and used; a bag
+    without one runs scan-only."""
+    from usvdrake.logs.rosbag import odometry_at, read_bag_scans
+
+    with_odom, plain = tmp_path / "odom.bag", tmp_path / "plain.bag"
+    truth = write_bag(with_odom, odometry=True)
+    write_bag(plain)
+    scans = list(read_bag_scans(with_odom))
+    # the odometry runs at twice the scans' rate: interpolated exactly on the straight line it
+    # follows (the last scan is past its last reading: none)
+    got = np.array([s.odometry_pose for s in scans[:-1]])
+    np.testing.assert_allclose(got, truth[:-1], atol=1e-9)
+    assert scans[-1].odometry_pose is None
+    assert all(s.odometry_pose is None for s in read_bag_scans(plain))
+    # yaw is interpolated the short way round across ±π
+    odom = np.array([[0.0, 0.0, 0.0, 3.1], [1.0, 1.0, 0.0, -3.1]])
+    at = odometry_at(odom, np.array([-1.0, 0.5, 1.0]))
+    assert np.isnan(at[0]).all() and at[1, 0] == pytest.approx(0.5)
+    assert abs(np.angle(np.exp(1j * at[1, 2]))) == pytest.approx(np.pi, abs=1e-9)
+    for bag, prior in ((with_odom, "wheel odometry"), (plain, "scan-only (log has no odometry)")):
+        out = tmp_path / bag.stem
+        assert main(["slam2d", str(bag), "--out", str(out), "--quiet", "--inline"]) == 0
+        assert json.loads((out / "metrics.json").read_text())["motion_prior"].startswith(prior)
 
 
 def test_slam2d_missing_log_is_one_line(tmp_path, capsys):
@@ -146,8 +215,10 @@ def test_slam2d_missing_log_is_one_line(tmp_path, capsys):
     assert "no such file" in capsys.readouterr().err
 
 
-def write_bag(path: Path, n: int = 40) -> np.ndarray:
-    """A ROS 1 bag of Hokuyo scans cast while moving through the synthetic room (the truth)."""
+def write_bag(path: Path, n: int = 40, odometry: bool = False) -> np.ndarray:
+    """A ROS 1 bag of Hokuyo scans cast while moving through the synthetic room (the truth);
+    with ``odometry``, the true poses also on /odom (nav_msgs/Odometry) at twice the scans'
+    rate, from the first scan to half a scan before the last."""
     from rosbags.rosbag1 import Writer
     from rosbags.typesys import Stores, get_typestore
 
@@ -181,7 +252,46 @@ def write_bag(path: Path, n: int = 40) -> np.ndarray:
                 intensities=np.zeros(0, np.float32),
             )
             writer.write(conn, (100 + k) * 10**9, store.serialize_ros1(msg, scan_t.__msgtype__))
+        if odometry:
+            _write_odometry(writer, store, truth, header_t, time_t)
     return truth
+
+
+def _write_odometry(writer, store, truth, header_t, time_t) -> None:
+    """``truth``'s poses (one per second from 100 s) on /odom every 0.5 s from 100 s to half
+    a second before the last pose."""
+    names = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseWithCovariance")
+    odom_t, pwc_t = (store.types[k] for k in names)
+    pose_t, point_t, quat_t = (
+        store.types[f"geometry_msgs/msg/{k}"] for k in ("Pose", "Point", "Quaternion")
+    )
+    twc_t, twist_t, vec_t = (
+        store.types[f"geometry_msgs/msg/{k}"] for k in ("TwistWithCovariance", "Twist", "Vector3")
+    )
+    conn = writer.add_connection("/odom", odom_t.__msgtype__, typestore=store)
+    k = np.arange(0.0, len(truth) - 1, 0.5)
+    x, y, yaw = (np.interp(k, np.arange(len(truth)), truth[:, i]) for i in range(3))
+    for kk, xi, yi, yawi in zip(k, x, y, yaw, strict=True):
+        t = 100.0 + kk
+        stamp = time_t(sec=int(np.floor(t)), nanosec=int(round((t % 1) * 1e9)))
+        msg = odom_t(
+            header=header_t(seq=0, stamp=stamp, frame_id="odom"),
+            child_frame_id="base_link",
+            pose=pwc_t(
+                pose=pose_t(
+                    position=point_t(x=xi, y=yi, z=0.0),
+                    orientation=quat_t(x=0.0, y=0.0, z=np.sin(yawi / 2), w=np.cos(yawi / 2)),
+                ),
+                covariance=np.zeros(36),
+            ),
+            twist=twc_t(
+                twist=twist_t(
+                    linear=vec_t(x=0.0, y=0.0, z=0.0), angular=vec_t(x=0.0, y=0.0, z=0.0)
+                ),
+                covariance=np.zeros(36),
+            ),
+        )
+        writer.write(conn, int(round(t * 1e9)), store.serialize_ros1(msg, odom_t.__msgtype__))
 
 
 def test_ros1_bag_scans_read_and_slam2d_tracks_them(tmp_path):

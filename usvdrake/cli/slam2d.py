@@ -1,5 +1,6 @@
 """``usvdrake slam2d``: 2D graph SLAM (Pham et al.) on recorded scans."""
 
+import argparse
 import json
 import sys
 
@@ -56,12 +57,23 @@ def add_arguments(m) -> None:
         help="after the last scan, link every node to the older ones within RADIUS [m] by PLICP "
         "from the final estimate and optimise again (slow: all pairs; default off)",
     )
-    m.add_argument(
-        "--odometry",
+    prior = m.add_mutually_exclusive_group()
+    prior.add_argument(
+        "--scan-only",
         action="store_true",
-        help="use a raw CARMEN log's wheel odometry as well: a constraint every metre, "
-        "scaled by what the scans measured, left out where it contradicts them (not "
-        "scan-only; a corrected log's pose fields are its reference, not odometry)",
+        help="ignore the log's wheel odometry (by default it is used where the log has it: a "
+        "raw CARMEN log's pose fields, a bag's /odom; a constraint every metre, scaled by what "
+        "the scans measured, left out where it contradicts them; a corrected CARMEN log's "
+        "pose fields are its reference, not odometry)",
+    )
+    # the default since issue 38; still accepted so that older command lines run unchanged
+    prior.add_argument("--odometry", action="store_true", help=argparse.SUPPRESS)
+    m.add_argument(
+        "--fast",
+        action="store_true",
+        help="with odometry, keep up with the robot: search about the odometry's guess, a node "
+        "every 0.15 m, loops looked for every 0.3 m (raw ACES 2.3x faster; raw MIT-CSAIL "
+        "0.22 m ATE against 0.16 m)",
     )
     m.add_argument("--quiet", action="store_true", help="no progress bar")
     m.add_argument("--json", action="store_true", help="print the metrics as JSON instead")
@@ -87,7 +99,8 @@ def run(args) -> int:
         seed=args.seed,
         full_in_worker=not args.inline,
         relink_radius=args.relink,
-        odometry=args.odometry,
+        odometry=False if args.scan_only else None,
+        fast=args.fast,
         **({} if args.full_period is None else {"full_period": args.full_period}),
         **({} if args.full_budget is None else {"full_budget_ms_per_node": args.full_budget}),
     )

@@ -121,6 +121,7 @@ def read_carmen(
     pose: str = "odometry",
     max_range: float = 50.0,
     damage: ReadDamage | None = None,
+    messages: set[str] | None = None,
 ) -> Iterator[CarmenScan]:
     """Yield ``(timestamp [s], LaserScan, pose (x, y, θ))`` for every FLASER line of a log.
 
@@ -129,6 +130,7 @@ def read_carmen(
     NEFF, comments) are passed over; malformed lines (a log truncated while recording, a
     corrupt file) and the unreadable rest of a broken compressed stream are skipped and
     counted in ``damage`` (the module's notes). ConfigError if the file is not text.
+    ``messages``: a set the names of the messages read are added to (:func:`is_corrected`).
     """
     if pose not in ("odometry", "laser"):
         raise ValueError(f"pose must be 'odometry' or 'laser', got {pose!r}")
@@ -137,6 +139,8 @@ def read_carmen(
         if not line.startswith("FLASER"):
             if _NOT_TEXT.search(line) or (line.strip() and not _MESSAGE_LINE.match(line)):
                 damage.skip(path, number, "not a CARMEN line")
+            elif messages is not None and line[:1].isupper():
+                messages.add(line.split(maxsplit=1)[0])
             continue
         try:
             yield parse_flaser(line.split(), pose, max_range)
@@ -168,6 +172,21 @@ def _lines(path: str | Path, damage: ReadDamage) -> Iterator[tuple[int, str]]:
             damage.skip(
                 path, "stream", "broken compressed stream (the rest of the file unread)", unread
             )
+
+
+def is_corrected(messages: set[str]) -> bool:
+    """Whether a log whose messages are ``messages`` (:func:`read_carmen`'s) is a "corrected"
+    log: its FLASER poses are a SLAM's estimate, not odometry. The corrected logs of Kümmerle
+    et al. 2009 carry the scan matcher's NEFF lines (its particles' effective number, one per
+    scan); no raw log does."""
+    return "NEFF" in messages
+
+
+def has_odometry(scans) -> bool:
+    """Whether a CARMEN log's scans carry odometry: their pose fields move (a log without an
+    odometer writes one pose, usually 0 0 0, on every FLASER line)."""
+    poses = np.array([rec.odometry_pose for rec in scans], float).reshape(-1, 3)
+    return len(poses) > 1 and bool(np.any(np.ptp(poses, axis=0) > 0.0))
 
 
 def read_poses(path: str | Path, pose: str = "laser") -> tuple[np.ndarray, np.ndarray]:

@@ -1,9 +1,13 @@
 """LaserScan from ROS 1 bags and ROS 2 bag folders, with the ``rosbags`` package (no ROS install).
 
-``read_bag_scans(path, topic=None)`` yields ``(timestamp [s], LaserScan)`` records for every
-``sensor_msgs/msg/LaserScan`` message (of ``topic`` if given), stamped with the message header's
-time (the bag's receive time when the header stamp is zero). Ranges outside
-[range_min, range_max] or not finite are no-returns (``inf``, ``valid=False``), as ROS defines.
+``read_bag_scans(path, topic=None)`` yields ``(timestamp [s], LaserScan, odometry pose)`` records
+for every ``sensor_msgs/msg/LaserScan`` message (of ``topic`` if given), stamped with the message
+header's time (the bag's receive time when the header stamp is zero). The odometry pose is the
+bag's wheel odometry (``nav_msgs/msg/Odometry`` on ``/odom``, or its only Odometry topic)
+interpolated to the scan's time, or None (no odometry, or the scan outside its span); it is
+the robot's base pose, not the laser's (no tf is read), which only the odometry's steps use.
+Ranges outside [range_min, range_max] or not finite are no-returns (``inf``, ``valid=False``),
+as ROS defines.
 
 Damage: a bag the ``rosbags`` package cannot open (garbage, a foreign or cut-off file) is
 refused with one line (:class:`ConfigError`); a message that does not deserialise or convert
@@ -31,6 +35,7 @@ from usvdrake.sensors.messages import LaserScan
 from usvdrake.typed_yaml import ConfigError
 
 LASER_SCAN = "sensor_msgs/msg/LaserScan"
+ODOMETRY = "nav_msgs/msg/Odometry"
 # what the rosbags package raises on damaged bytes: its own errors, and what its parsers hit in
 # bytes they do not check (short structs, bad UTF-8, indexes and sizes out of range, broken
 # bz2 / lz4 chunks: OSError, EOFError, RuntimeError; a message's time that does not match its
@@ -60,6 +65,8 @@ BAG_ERRORS = (
 class BagScan(NamedTuple):
     timestamp: float  # [s]
     scan: LaserScan
+    # (x [m], y [m], yaw [rad]) of the bag's wheel odometry at the scan's time, or None
+    odometry_pose: np.ndarray | None = None
 
 
 def is_bag(path: str | Path) -> bool:
@@ -146,7 +153,49 @@ def read_bag_scans(
             found = sorted({f"{c.topic} ({c.msgtype})" for c in reader.connections})
             wanted = f"LaserScan messages on {topic}" if topic else "LaserScan messages"
             raise ConfigError(path, "", wanted, "only " + (", ".join(found) or "no messages"))
-        yield from bag_messages(reader, conns, path, damage, _bag_scan)
+        odom = [c for c in reader.connections if c.msgtype == ODOMETRY]
+        # /odom if the bag has it, else its one Odometry topic (several others: which is the
+        # wheels' is not ours to guess)
+        odom = [c for c in odom if c.topic == "/odom"] or (odom if len(odom) == 1 else [])
+        if not odom:
+            yield from bag_messages(reader, conns, path, damage, _bag_scan)
+            return
+        records = list(bag_messages(reader, conns + odom, path, damage, _scan_or_odometry))
+    scans = [r for r in records if isinstance(r, BagScan)]
+    odometry = np.array([r for r in records if not isinstance(r, BagScan)], float).reshape(-1, 4)
+    poses = odometry_at(odometry, np.array([s.timestamp for s in scans], float))
+    for rec, pose in zip(scans, poses, strict=True):
+        yield rec._replace(odometry_pose=pose if np.all(np.isfinite(pose)) else None)
+
+
+def odometry_at(odometry: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Poses (n × 3) at the times ``t`` of an odometry stream ``odometry`` (rows t, x, y,
+    yaw), interpolated linearly (yaw unwrapped first); NaN outside its time span or without
+    two readings."""
+    out = np.full((len(t), 3), np.nan)
+    odometry = odometry[np.argsort(odometry[:, 0], kind="stable")] if len(odometry) else odometry
+    if len(odometry) < 2:
+        return out
+    ts = odometry[:, 0]
+    inside = (t >= ts[0]) & (t <= ts[-1])
+    yaw = np.unwrap(odometry[:, 3])
+    for k, column in enumerate((odometry[:, 1], odometry[:, 2], yaw)):
+        out[inside, k] = np.interp(t[inside], ts, column)
+    return out
+
+
+def _scan_or_odometry(conn, t_bag: int, msg):
+    """A :class:`BagScan`, or an odometry reading (t, x, y, yaw) of a nav_msgs/Odometry."""
+    if conn.msgtype != ODOMETRY:
+        return _bag_scan(conn, t_bag, msg)
+    stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+    stamp = stamp if stamp > 0 else 1e-9 * t_bag
+    p, q = msg.pose.pose.position, msg.pose.pose.orientation
+    yaw = np.arctan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+    row = (stamp, float(p.x), float(p.y), float(yaw))
+    if not np.all(np.isfinite(row)):
+        raise ValueError(f"{conn.topic}: an odometry reading with a non-finite field")
+    return row
 
 
 def _bag_scan(conn, t_bag: int, msg) -> BagScan:

@@ -1,7 +1,10 @@
 """Offline 2D SLAM on recorded scans (``usvdrake slam2d``): CARMEN logs and ROS 1/2 bags.
 
-Scan-only by default (no odometry, as Pham et al.'s system runs; ``odometry=True`` adds a raw CARMEN
-log's wheel odometry, calibrated by the scans): every scan goes through :class:`GraphSlam`; the
+Wheel odometry where the log has it (a raw CARMEN log's FLASER pose fields, a ROS bag's
+``/odom``), calibrated by the scans and gated against them, as a motion prior between the
+scans; scan-only (Pham et al.'s system) where it has none, on a "corrected" CARMEN log (whose
+pose fields are the reference) or when asked (``odometry=False``, ``--scan-only``). Every
+scan goes through :class:`GraphSlam`; the
 output trajectory is every scan's pose re-expressed from its node after the last optimisation,
 stamped with the log's own timestamps. With a reference trajectory (e.g. a "corrected" log) the
 ATE is computed after an SE(2) alignment (Sturm et al. 2012).
@@ -23,7 +26,7 @@ from usvdrake.analysis.trajectory_metrics import (
     trajectory_from_planar,
     write_tum,
 )
-from usvdrake.logs.carmen import associate_scans, read_carmen
+from usvdrake.logs.carmen import associate_scans, has_odometry, is_corrected, read_carmen
 from usvdrake.logs.damage import ReadDamage
 from usvdrake.logs.mission_log import read_log_scans, read_log_states
 from usvdrake.logs.rosbag import is_bag, read_bag_scans
@@ -115,6 +118,21 @@ LOG_CONFIG = GraphSlamConfig(
     # `usvdrake slam2d --relink RADIUS`
 )
 
+
+# `slam2d --fast`: LOG_CONFIG made to keep up with a log that has wheel odometry (the raw
+# CARMEN logs: every scan the robot recorded, 5-8 a second; docs/experiments/slam2d-realtime.md,
+# 2026-11-27). The odometry says roughly where each scan is, so tracking searches ±0.3 m /
+# ±0.35 rad about its guess, not ±1.5 m / ±92° about rest; a node every 0.15 m / 0.05 rad, not
+# 5 cm; loops looked for every 0.3 m of the graph, not at every node. Raw ACES's first 800
+# scans: 79 -> 36 ms of CPU a scan, 2.98x -> 6.84x real time. It costs accuracy (raw MIT-CSAIL
+# 0.156 -> 0.219 m ATE, Freiburg 079 0.104 -> 0.109 m), so the default stays LOG_CONFIG.
+LOG_ODOMETRY_CONFIG = replace(
+    LOG_CONFIG,
+    odometry_search_window=[0.3, 0.35],
+    node_translation=0.15,
+    node_rotation=0.05,
+    loop_spacing=0.3,
+)
 
 # [s] of log time between the full-graph optimisations loops ask for, offline (the LeafSystem
 # runs them in a 1 s event). Freiburg 079, where almost every scan closes a loop: 1 s gave
@@ -266,7 +284,8 @@ def run_slam2d(
     full_in_worker: bool | None = None,
     full_budget_ms_per_node: float = FULL_BUDGET_MS_PER_NODE,
     relink_radius: float | None = None,
-    odometry: bool = False,
+    odometry: bool | None = None,
+    fast: bool = False,
 ) -> dict:
     """Run the graph SLAM on a CARMEN log, a ROS bag or a mission log; write trajectory.tum,
     map.png, metrics.json and, scored against a ``reference``, ate.png (where the error lies:
@@ -279,31 +298,46 @@ def run_slam2d(
     them in the worker process (True) or here (False) instead of as ``config`` says;
     ``full_budget_ms_per_node``: the worker's time per node (:func:`run_graph_slam`);
     ``relink_radius`` [m]: relink the final estimate (:meth:`GraphSlam.relink`) instead of as
-    ``config`` says. ``odometry``: use a raw CARMEN log's wheel odometry (the laser's pose
-    fields of its FLASER lines; :meth:`GraphSlam.process`) — not a scan-only run, and
-    meaningless on a "corrected" log, whose pose fields are the reference itself."""
+    ``config`` says. ``odometry``: None (default) or True: the log's wheel odometry where it
+    has it (a raw CARMEN log's FLASER pose fields, a bag's ``/odom``; :meth:`GraphSlam.process`),
+    scan-only where it has none or on a "corrected" CARMEN log, whose pose fields are the
+    reference; False: scan-only. ``metrics["motion_prior"]`` says which was used and why.
+    ``fast``: with odometry on a CARMEN log, :data:`LOG_ODOMETRY_CONFIG` (keeps up with the
+    robot, less accurate)."""
     log = Path(log)
     base = STREAM_CONFIG
     damage = ReadDamage()  # what a damaged log made the reader skip (metrics: skipped_records)
+    messages: set[str] = set()  # a CARMEN log's message names (is_corrected)
     if log.suffix == ".mcap":
         scans = read_log_scans(log, damage=damage)
     elif is_bag(log):
         scans = list(read_bag_scans(log, damage=damage))
     elif log.is_file():
         # the laser's pose fields: the odometry's pose of the laser itself (in fr079 0.04 m ahead
-        # of the robot's odom fields), which only --odometry reads
-        scans = list(read_carmen(log, pose="laser", damage=damage))
+        # of the robot's odom fields)
+        scans = list(read_carmen(log, pose="laser", damage=damage, messages=messages))
         base = LOG_CONFIG
     else:
         raise ConfigError(
             log, "", "a CARMEN log, a ROS 1/2 bag or a usvdrake .mcap", "no such file"
         )
-    if odometry and base is not LOG_CONFIG:
-        raise ConfigError(log, "", "a CARMEN log (odometry is read from those only)", "not one")
     if max_scans:
         scans = scans[:max_scans]
     if not scans:
         raise ConfigError(log, "", "laser scans", "none" + damage.note())
+    if odometry is False:
+        without = "--scan-only"
+    elif base is LOG_CONFIG and (is_corrected(messages) or _same_file(log, reference)):
+        without = "a corrected log: its poses are the reference"
+    elif not any(getattr(rec, "odometry_pose", None) is not None for rec in scans) or (
+        base is LOG_CONFIG and not has_odometry(scans)
+    ):
+        without = "log has no odometry"
+    else:
+        without = None
+    odometry = without is None
+    if odometry and fast and base is LOG_CONFIG:
+        base = LOG_ODOMETRY_CONFIG
     clean = scans  # the reference names scans by their ranges, garbage or not
     corrupted = np.zeros(0, int)
     if garbage > 0:
@@ -344,13 +378,15 @@ def run_slam2d(
     timed = _stamps_advance(scans)
     metrics = {
         "log": str(log),
+        # wheel odometry or scan-only, and why
+        "motion_prior": _motion_prior(slam, without),
         "scans": len(scans),
         "garbage_scans": len(corrupted),
         # records of a damaged log left out, bytes it could not read, and why (ReadDamage)
         **damage.metrics(),
         "odometry": odometry,  # False: scan-only
         # (distance, turn) factors the scans calibrated the odometry by (GraphSlam.odometry_scale)
-        "odometry_scale": list(slam.odometry_scale) if odometry else None,
+        "odometry_scale": [float(k) for k in slam.odometry_scale] if odometry else None,
         # odometry constraints added, and left out for disagreeing with the scans (odometry_gate)
         "odometry_constraints": sum(c.kind == "odometry" for c in slam.constraints),
         "odometry_rejected": int(slam.stats["odometry_rejected"]),
@@ -413,6 +449,23 @@ def run_slam2d(
         )
     (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
     return metrics
+
+
+def _same_file(log: Path, reference) -> bool:
+    """Whether ``reference`` names the log itself (a log scored against its own poses)."""
+    try:
+        return reference is not None and Path(reference).resolve() == log.resolve()
+    except OSError:
+        return False
+
+
+def _motion_prior(slam: GraphSlam, without: str | None) -> str:
+    """What moved the SLAM between scans besides them, in words: ``wheel odometry (617
+    constraints, 2 gated out)`` or ``scan-only (why)``."""
+    if without is not None:
+        return f"scan-only ({without})"
+    added = sum(c.kind == "odometry" for c in slam.constraints)
+    return f"wheel odometry ({added} constraints, {slam.stats['odometry_rejected']} gated out)"
 
 
 def _reference_pairs(scans, stamps, poses, reference):

@@ -60,6 +60,9 @@ class GraphSlamConfig:
     loop_gnc: bool = False
     loop_min_sigma: list[float] = field(default_factory=lambda: [0.03, 0.03, 0.01])
     loop_per_chain: bool = False  # match one node per pass near the new node, not every one
+    # [m] a new node looks for loops only once the graph has gone this far (or turned 1 rad)
+    # since the last node that looked (0: every node; for logs dense in nodes; ours)
+    loop_spacing: float = 0.0
     loop_max_chains: int = 8  # [-] passes matched per new node, nearest first
     loop_angular_window: float = 0.5  # [rad]
     loop_distinct: float = 0.5  # [m] a runner-up pose this far from the best is a rival
@@ -109,6 +112,10 @@ class GraphSlamConfig:
     # that one scores search_prior_margin higher. Off: on raw MIT-CSAIL, whose logged odometry
     # lags and jitters by up to 0.3 rad a scan, it took the ATE from 0.21 to 0.29 m
     odometry_seed: bool = False
+    # [m, rad] > 0: a scan with an odometry step is searched within ± these of the
+    # odometry's guess instead of search_*_window about rest or the constant velocity (the
+    # wheels say roughly where the scan is: a small window, not ±1.5 m / ±92° every scan; ours)
+    odometry_search_window: list[float] = field(default_factory=lambda: [0.0, 0.0])
     # the odometry's distance and turn are scaled by what the scans measured where they could
     # (GraphSlam.odometry_scale): steps whose tracking σ along the motion is within this [m]
     odometry_calibrate: bool = True

@@ -76,12 +76,17 @@ class TrackingMixin:
         if res.n_valid < self.cfg.min_link_points or res.residual > trigger:
             # a failed match from the constant-velocity guess: seed PLICP by a correlative search
             # over rotations × translations (Olson 2009) and keep the better of the two
+            centre = self._rel if self.cfg.search_from_rest else guess
+            linear, angular = self.cfg.search_linear_window, self.cfg.search_angular_window
+            if odometry_step is not None and min(self.cfg.odometry_search_window) > 0:
+                centre = compose(self._rel, odometry_step)
+                linear, angular = self.cfg.odometry_search_window
             seed = correlative_match(
                 last.field(self.cfg),
                 points,
-                self._rel if self.cfg.search_from_rest else guess,
-                self.cfg.search_linear_window,
-                self.cfg.search_angular_window,
+                centre,
+                linear,
+                angular,
                 prior_from=self._rel,
                 lateral_weight=self.cfg.lateral_weight,
             ).pose
