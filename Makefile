@@ -44,7 +44,7 @@ $(FOXGLOVE)/.done: | $(STAMP)
 foxglove-schemas: $(FOXGLOVE)/.done
 
 test: lint foxglove-schemas
-	USVDRAKE_QUICK=1 $(BIN)/python -m pytest -q -n $(TEST_JOBS) --dist worksteal tests --nbmake notebooks
+	USVDRAKE_QUICK=1 $(BIN)/python -m pytest -q -n $(TEST_JOBS) --dist worksteal --durations=15 tests --nbmake notebooks
 
 bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e ".[bench]"
