@@ -30,6 +30,7 @@ import numpy as np
 import open3d as o3d
 
 from usvdrake.sensors.lidar_model import LidarConfig, LidarModel, preset_by_name
+from usvdrake.viz.meshcat_world import solid_mesh
 from usvdrake.worlds import make_world
 from usvdrake.worlds.raycast import Scene, cast
 from usvdrake.worlds.solids import Solid, prism
@@ -79,28 +80,14 @@ def polygonized(solids: list[Solid]) -> list[Solid]:
 
 
 def triangles(solids: list[Solid]) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (V × 3) and triangles (T × 3) of the closed prisms: sides and fan-triangulated
-    caps (the footprints are convex)."""
+    """Vertices (V × 3) and triangles (T × 3) of all the solids, as the Meshcat world draws
+    them (:func:`solid_mesh`; the cylinders are prisms already)."""
     verts, tris, base = [], [], 0
     for s in solids:
-        p = s.polygon
-        k = len(p)
-        verts += [
-            np.column_stack([p, np.full(k, s.z_min)]),
-            np.column_stack([p, np.full(k, s.z_max)]),
-        ]
-        i = np.arange(k)
-        j = (i + 1) % k
-        sides = np.concatenate([np.column_stack([i, j, j + k]), np.column_stack([i, j + k, i + k])])
-        fan = np.arange(1, k - 1)
-        caps = np.concatenate(
-            [
-                np.column_stack([np.zeros(k - 2, int), fan + 1, fan]),
-                np.column_stack([np.full(k - 2, k), fan + k, fan + k + 1]),
-            ]
-        )
-        tris.append(np.concatenate([sides, caps]) + base)
-        base += 2 * k
+        v, t = solid_mesh(s)
+        verts.append(v)
+        tris.append(t + base)
+        base += len(v)
     return np.concatenate(verts), np.concatenate(tris)
 
 

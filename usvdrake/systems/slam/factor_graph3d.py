@@ -281,7 +281,6 @@ class FactorGraph3D:
         self._edges: list[np.ndarray] = []  # per keyframe F^e (N × 3) [m], sensor frame
         self._planes: list[np.ndarray] = []  # per keyframe F^p
         self._poses = np.zeros((0, 4, 4))  # current estimates T_world_keyframe (n × 4 × 4)
-        self._world_cache: dict[int, tuple] = {}  # i → (pose, edges, planes) in the world
         # M_t of the odometry match, edited in place as the window slides (no rebuild)
         self._local_map = VoxelMap(c.submap_edge_voxel, c.submap_planar_voxel)
         self._last_loop = -(10**9)
@@ -294,29 +293,18 @@ class FactorGraph3D:
 
     # --- keyframes and lidar odometry (Roboat II §V-A) -------------------------------------------
 
-    def _world_clouds(self, i: int) -> tuple[np.ndarray, np.ndarray]:
-        """Keyframe i's (edges, planes) in the world frame at its current estimate, cached
-        while the estimate is unchanged (LIO-SAM's ``laserCloudMapContainer``): iSAM2 moves
-        only the poses its update touched, so most of a submap is reused."""
-        T = self._poses[i]
-        hit = self._world_cache.get(i)
-        if hit is not None and np.array_equal(hit[0], T):
-            return hit[1], hit[2]
-        e, p = transform_points(T, self._edges[i]), transform_points(T, self._planes[i])
-        self._world_cache[i] = (T.copy(), e, p)
-        return e, p
-
     def _local_submap(self, indices: range) -> VoxelMap:
         """M_t over ``indices``, edited in place (:meth:`VoxelMap.slide`), not rebuilt."""
         self._local_map.slide(indices, self._poses, self._edges, self._planes)
         return self._local_map
 
     def _submap(self, indices: range):
+        """A loop candidate's map, built for the one search (the odometry's is the voxel map)."""
         c = self.config
-        clouds = [self._world_clouds(i) for i in indices]
+        T = self._poses
         return build_feature_map(
-            [e for e, _ in clouds],
-            [p for _, p in clouds],
+            [transform_points(T[i], self._edges[i]) for i in indices],
+            [transform_points(T[i], self._planes[i]) for i in indices],
             None,
             c.submap_edge_voxel,
             c.submap_planar_voxel,
@@ -366,8 +354,6 @@ class FactorGraph3D:
             graph.add(gtsam.PriorFactorPose3(X(0), gtsam.Pose3(T_k), self._prior_noise))
         else:
             fmap = self._local_submap(range(max(0, k - c.submap_keyframes), k))
-            for i in [i for i in self._world_cache if i < k - c.submap_keyframes]:
-                del self._world_cache[i]  # only the sliding window is reused
             res = register_scan(features, fmap, T_guess, self._registration_ds)
             T_k = res.T if np.all(np.isfinite(res.T)) else T_guess
             delta = np.linalg.inv(self._poses[k - 1]) @ T_k
