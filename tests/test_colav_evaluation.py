@@ -291,6 +291,28 @@ def test_stand_on_deviation_excused_while_giving_way_to_another_target():
     assert ev.encounters == 2 and ev.compliant == 2
 
 
+def test_stand_on_deviation_excused_after_another_stand_on_release_only():
+    # A crosses from port far out and gives way; B crosses from port nearer and holds on, so
+    # the own ship (stand-on to both) may act for B once B is clearly not acting (Rule
+    # 17(a)(ii)). That action must not count against the duty to keep course for A; the same
+    # turn before B's release still does.
+    a = track(-6000.0, 6000.0, EAST, 5.0, turn_at=60.0, turn_deg=-60.0)
+    b = crossing_from_port(gives_way=False)
+    route = np.array([[0.0, 0.0], [0.0, 9000.0]])
+    for turn_at, ok in ((420.0, True), (30.0, False)):
+        own = track(0.0, 0.0, NORTH, 5.0, turn_at=turn_at, turn_deg=-90.0, rate_deg=3.0)
+        assert not judge(own, a).compliant
+        ev = evaluate_situation(
+            "two", "CR-SO, CR-SO", own, HULL, {1: (a, HULL), 2: (b, HULL)}, SETTINGS, route
+        )
+        by_id = {t.target_id: t for t in ev.targets}
+        assert by_id[1].encounter == by_id[2].encounter == "CR-SO"
+        if ok:  # held on until 10 min before the predicted collision (t = 200 s)
+            assert by_id[2].t_release_s == pytest.approx(200.0, abs=10.0)
+        assert by_id[1].compliant is ok, (turn_at, by_id[1].reasons)
+        assert by_id[2].compliant is ok, (turn_at, by_id[2].reasons)
+
+
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "traffic_situations"
 
 

@@ -79,7 +79,7 @@ class EncounterConfig:
     # SB-MPC roles from DNV's sectors, as the evaluation classifies (``SbmpcParams.sector_roles``)
     sector_roles: bool = False
     # SB-MPC holds its duties until the target is past and clear (``SbmpcParams.hold_until_clear``)
-    hold_until_clear: bool = False
+    hold_until_clear: bool = True
 
     def froude_scaled(self, k: float) -> "EncounterConfig":
         """Distances × k, times × √k (``scaling.froude_scaled``); AIS sampling unchanged (the

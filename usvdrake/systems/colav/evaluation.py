@@ -22,8 +22,10 @@ taken from them):
   ``keep_speed_tol``) until the give-way ship is clearly not acting — the range falls below
   ``standon_release_m`` or the predicted TCPA below ``standon_release_tcpa_s`` with DCPA below
   the safety distance — then any action, except (crossing, Rule 17(c)) a port turn for a ship on
-  the own port side. Deviations while the own ship is giving way to another target are excused
-  (multi-ship encounters, where one ship's duties can conflict with another's);
+  the own port side. Deviations while the own ship is giving way to another target, or acting
+  as a released stand-on ship towards another (Rule 17(a)(ii), from that target's release to
+  its CPA), are excused (multi-ship encounters, where one ship's duties can conflict with
+  another's: Rule 2(b));
 - a collision (hull outlines overlap, :mod:`usvdrake.systems.colav.hull`) is never compliant.
 
 Course changes are measured against the planned route's course (nearest leg) when a route is
@@ -153,6 +155,7 @@ class TargetEvaluation:
     crossed_ahead: bool
     compliant: bool
     reasons: list[str] = field(default_factory=list)
+    t_release_s: float | None = None  # stand-on: when the give-way ship was clearly not acting
 
     def to_dict(self) -> dict:
         return jsonable(asdict(self))
@@ -359,6 +362,7 @@ def _judge_stand_on(res, etype, own, tgt, window, dpsi, reduction, rng, p, excus
     k_start = int(np.argmax(window))
     after = np.flatnonzero(release[k_start:])
     k_rel = k_start + int(after[0]) if len(after) else len(t)
+    res.t_release_s = float(t[k_rel]) if k_rel < len(t) else None
     keep = window & (np.arange(len(t)) < k_rel) & ~_in_intervals(t, excused)
     if np.any(keep):
         course_dev = float(np.max(np.abs(dpsi[keep])))
@@ -397,7 +401,8 @@ def evaluate_situation(
     """Evaluate a finished situation. ``targets`` maps target id → (ShipTrack, Hull); ``route_xy``
     the own planned route ((n, 2) waypoints, the last one the destination)."""
     route = np.asarray(route_xy, float)
-    # First pass: give-way intervals excuse stand-on deviations for other targets.
+    # First pass: give-way intervals, and stand-on ones from their release (Rule 17(a)(ii):
+    # action then is the own ship's to take), excuse stand-on deviations for other targets.
     first = {
         tid: evaluate_target(own, tr, own_hull, h, settings, params, route, tid)
         for tid, (tr, h) in targets.items()
@@ -408,6 +413,10 @@ def evaluate_situation(
             (e.t_start_s, e.t_cpa_s)
             for other, e in first.items()
             if other != tid and e.role == "give-way" and e.t_start_s is not None
+        ] + [
+            (e.t_release_s, e.t_cpa_s)
+            for other, e in first.items()
+            if other != tid and e.role == "stand-on" and e.t_release_s is not None
         ]
         if first[tid].role == "stand-on" and excused:
             evals.append(

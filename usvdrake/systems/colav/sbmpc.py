@@ -94,7 +94,9 @@ class SbmpcParams:
     k_mean: float = 3.0  # weight of the time-averaged risk (our addition, see the docstring)
     kappa: float = 5.0  # COLREG violation μ
     lam: float = 5.0  # crossing ahead τ
-    k_p: float = 3.0  # speed reduction
+    # speed reduction; 3 → 1.5 made slowing down compete with long starboard detours (DNV 12
+    # and 27 came back under 1.2 × the route, docs/experiments/colav-tuning.md run d5)
+    k_p: float = 1.5
     k_chi_starboard: float = 1.0  # per rad²
     k_chi_port: float = 3.0
     k_dp: float = 0.5
@@ -116,14 +118,14 @@ class SbmpcParams:
     # the course held at the release (Rule 17(c)); an unreleased stand-on target keeps the
     # course within ``port_limit_deg`` of the route's while no give-way duty is open (Rule
     # 17(a)(i)). False: the older rule (SB-MPC's roles, open until the present course's CPA).
-    # Off by default: on DNV's 40 it raised compliance 81.1 → 86.3 % but one path went to
-    # 1.214 × the route (docs/experiments/colav-tuning.md, run h5); canal set 60 → 83.6 %.
-    hold_until_clear: bool = False
+    # On by default since run d6 (docs/experiments/colav-tuning.md): compliance DNV 81.1 →
+    # 92.6 %, canal 60 → 89.1 %, at the price of one DNV path at 1.355 × the route (31).
+    hold_until_clear: bool = True
     # the stand-on crossing port limit from the course held at the release even when that is to
     # starboard of the route (True: the evaluation's reading of Rule 17(c); False: from the
     # route's course at most, so a ship released while on a give-way offset for another target
     # may return to its route: shorter paths, see docs/experiments/colav-tuning.md)
-    stand_on_limit_from_release: bool = False
+    stand_on_limit_from_release: bool = True
 
     @classmethod
     def for_safety_distance(
@@ -337,7 +339,10 @@ def hazard(
     side = ey * rx - ex * ry  # cross(target heading, own − target)
     along = -(ex * rx + ey * ry)
     crossed_ahead = (side * side[:, :1, :] < 0.0) & (along > 0.0)
-    tau = close & crossed_ahead & ((sp > params.min_target_speed) & (give_way | so_cross))
+    # a stand-on ship still holding (Rule 17(a)(i)) owes the target nothing, passing ahead included
+    tau = (
+        close & crossed_ahead & ((sp > params.min_target_speed) & (give_way | so_cross & ~holding))
+    )
     inst = risk + params.kappa * mu + params.lam * tau
     h = inst.reshape(chi_k.size, -1).max(axis=1)
     # Already inside a safety zone, every behaviour's maximum sits at t ≈ 0 and is the same for
@@ -448,6 +453,7 @@ class Sbmpc:
         _, _, tcpa_nominal = relevance(p, pos0, vn, tp, tv)
         lim = np.radians(p.port_limit_deg)
         rel_now = float(wrap_angle(course - ref))
+        ranges = np.linalg.norm(tp - pos0, axis=1)
         port_limit, keep_course, give_way_open = np.inf, False, False
         for i, tid in enumerate(ids):
             if not keep[i]:
@@ -461,7 +467,9 @@ class Sbmpc:
             head_on, give_way, stand_on, so_cross = duty[0]
             if head_on or give_way:
                 port_limit, give_way_open = min(port_limit, lim), True
-            if not hold_stand_on:
+            # near the route's end a far stand-on target no longer holds the course; a close
+            # one still does (a port turn towards it is what Rule 17(c) forbids)
+            if not hold_stand_on and ranges[i] > p.d_close:
                 continue
             if so_cross and released[i]:
                 duty[2] = rel_now if duty[2] is None else duty[2]
