@@ -396,6 +396,8 @@ class Sbmpc:
                 elif tid not in self.roles:
                     self.roles[tid] = fresh[i]
             roles = np.array([self.roles.get(tid, fresh[i]) for i, tid in enumerate(ids)])
+            if self.params.hold_until_clear:
+                roles = self._hazard_roles(ids, roles, v0, tp - pos0, tv)
             now = stand_on_released(self.params, pos0, v0, tp, tv)
             self.released = {tid for tid in self.released if tid in self.roles}
             self.released |= {tid for i, tid in enumerate(ids) if keep[i] and now[i]}
@@ -440,6 +442,22 @@ class Sbmpc:
             active=True,
             encounter_open=encounter_open,
         )
+
+    def _hazard_roles(self, ids, roles, v0, rel, tv) -> np.ndarray:
+        """The roles the hazard uses with ``hold_until_clear``: a head-on or give-way duty by
+        either classification (the paper's angles or DNV's sectors, latched in ``duties``)
+        wins over the paper's stand-on, so that a ship crossing from starboard at a shallow
+        angle, "overtaking" by the paper's angles, is not held as a stand-on target (no
+        collision cost) until it is 1 nmi away."""
+        if len(ids) == 0:
+            return roles
+        sect = np.stack(classify_sectors(v0, rel, tv, self.params.min_target_speed), axis=1)
+        union = np.array(
+            [self.duties[tid][0] if tid in self.duties else roles[i] | sect[i]
+             for i, tid in enumerate(ids)], dtype=bool,
+        ).reshape(-1, 4)  # fmt: skip
+        duty = union[:, 0] | union[:, 1]
+        return np.column_stack([union[:, 0], union[:, 1], roles[:, 2] & ~duty, roles[:, 3] & ~duty])
 
     def _duty_costs(
         self, ids, keep, tcpa0, pos0, v0, tp, tv, course, course_ref, speed_ref, ref, released,
