@@ -29,6 +29,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from usvdrake.sensors.messages import LaserScan
+from usvdrake.systems.slam import plicp_kernel as kernel
+
+GRID_CELL = 0.25  # nearest-neighbour grid cell [max_distance]: exact for any size, only speed
 
 
 @dataclass
@@ -240,13 +243,94 @@ def plicp(
     (trimmed ICP) and solves Pham et al. eq. 1 exactly with :func:`solve_point_to_line`. It stops
     when the correspondences repeat (the solve would return the same pose) or the step is below
     ``tolerance_t`` [m] and ``tolerance_theta`` [rad]. ``rotation_search`` first replaces the
-    initial θ by :func:`coarse_rotation`. ``tree``: a prebuilt ``cKDTree(reference)``.
+    initial θ by :func:`coarse_rotation`. ``tree``: a prebuilt ``cKDTree(reference)``,
+    used only by the rotation search.
 
     Coarse to fine (for speed; the answer is the full-resolution one): the first iterations use
     every ``coarse_stride``-th current point until a step is below ``coarse_tolerance`` [m, rad];
     the rest use all of them. The correspondence search dominates the cost, so this roughly
     halves it on 1081-beam scans.
+
+    The loop runs compiled (:mod:`usvdrake.systems.slam.plicp_kernel`, with its own exact
+    nearest-neighbour grid of the reference); :func:`plicp_reference` is the same algorithm in
+    numpy, kept as the tests' reference, and runs the match instead when a solve is
+    ill-conditioned (a featureless corridor), where only numpy's own rounding gives today's answer.
     """
+    reference = _points(reference)
+    current = _points(current)
+    t = np.array(initial[:2], float)
+    theta = float(initial[2])
+    if rotation_search:
+        tree = cKDTree(reference) if tree is None else tree
+        theta = coarse_rotation(tree, current, t, theta)
+    params = np.array(
+        [max_distance, max_segment, trim, tolerance_t, tolerance_theta, coarse_tolerance], float
+    )
+    pose, iterations, converged, i, j1, j2, fallback = kernel.run(
+        reference,
+        current,
+        GRID_CELL * max_distance,
+        np.array([t[0], t[1], theta]),
+        params,
+        max_iterations,
+        coarse_stride,
+    )
+    if fallback:  # an ill-conditioned solve: numpy's rounding decides it, as it always did
+        return plicp_reference(
+            reference,
+            current,
+            initial,
+            max_iterations,
+            max_distance,
+            max_segment,
+            trim,
+            tolerance_t,
+            tolerance_theta,
+            rotation_search,
+            coarse_stride,
+            coarse_tolerance,
+            tree,
+        )
+    t, theta, sel, residual = pose[:2], float(pose[2]), np.zeros((0, 3), int), np.inf
+    if len(i):
+        # the last solve once more in numpy: bit for bit the reference's pose (the kernel's is
+        # ~1e-13 off, which a pose graph's tolerance-based stopping grows to ~1e-6 in a mission)
+        n = line_normals(reference[j1], reference[j2])
+        t, theta = solve_point_to_line(current[i], reference[j1], n)
+        sel, residual = _selection(reference, current, t, theta, i, j1, j2, n)
+    return PlicpResult(
+        t=t,
+        theta=theta,
+        iterations=int(iterations),
+        converged=bool(converged),
+        n_valid=len(sel),
+        residual=residual,
+        correspondences=sel,
+    )
+
+
+def _points(points) -> np.ndarray:
+    """(N × 2) float64 C-contiguous, as the kernel takes them."""
+    return np.ascontiguousarray(np.asarray(points, float).reshape(-1, 2))
+
+
+def plicp_reference(
+    reference: np.ndarray,
+    current: np.ndarray,
+    initial: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    max_iterations: int = 50,
+    max_distance: float = 1.0,
+    max_segment: float = 1.0,
+    trim: float = 0.9,
+    tolerance_t: float = 1e-6,
+    tolerance_theta: float = 1e-7,
+    rotation_search: bool = False,
+    coarse_stride: int = 4,
+    coarse_tolerance: float = 1e-3,
+    tree: cKDTree | None = None,
+) -> PlicpResult:
+    """:func:`plicp` in numpy (cKDTree, argpartition, np.roots): the reference its compiled
+    kernel is tested against."""
     reference = np.asarray(reference, float)
     current = np.asarray(current, float)
     tree = cKDTree(reference) if tree is None else tree
@@ -340,7 +424,45 @@ def plicp_at(
     against ``reference``: the trimmed correspondences PLICP would pair there and their RMS
     point-to-line error, no solve (``iterations`` 0, ``converged``). For a pose found by other
     means (a likelihood-field refinement) that must pass PLICP's checks and feed Censi's
-    covariance like a PLICP match."""
+    covariance like a PLICP match. ``tree`` is accepted for the callers' convenience and
+    unused (the kernel indexes the reference itself)."""
+    reference = _points(reference)
+    current = _points(current)
+    t, theta = np.array(pose[:2], float), float(pose[2])
+    i, j1, j2 = kernel.held(
+        reference,
+        current,
+        GRID_CELL * max_distance,
+        np.array([t[0], t[1], theta]),
+        max_distance,
+        max_segment,
+        trim,
+    )
+    sel, residual = np.zeros((0, 3), int), np.inf
+    if len(i) >= 3:  # the residual in numpy, bit for bit the reference's (as in plicp)
+        n = line_normals(reference[j1], reference[j2])
+        sel, residual = _selection(reference, current, t, theta, i, j1, j2, n)
+    return PlicpResult(
+        t=t,
+        theta=theta,
+        iterations=0,
+        converged=True,
+        n_valid=len(sel),
+        residual=residual,
+        correspondences=sel,
+    )
+
+
+def plicp_at_reference(
+    reference: np.ndarray,
+    current: np.ndarray,
+    pose,
+    max_distance: float = 1.0,
+    max_segment: float = 1.0,
+    trim: float = 0.9,
+    tree: cKDTree | None = None,
+) -> PlicpResult:
+    """:func:`plicp_at` in numpy: the reference its compiled kernel is tested against."""
     reference = np.asarray(reference, float)
     current = np.asarray(current, float)
     tree = cKDTree(reference) if tree is None else tree
