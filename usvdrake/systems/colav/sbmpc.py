@@ -235,9 +235,11 @@ def classify(params, own_velocity, rel_position, target_velocity):
 
 
 def own_velocity(params: SbmpcParams, course, speed, course_ref) -> np.ndarray:
-    """The own velocity the roles are judged from (the nominal course when nearly stopped)."""
-    heading = course if speed > params.min_target_speed else course_ref
-    return max(speed, params.min_target_speed) * np.array([np.cos(heading), np.sin(heading)])
+    """The own velocity the roles are judged from: along ``course`` at least at
+    ``min_target_speed`` (a caller whose ship is nearly stopped passes its heading as the course:
+    ``SbmpcColav`` does; the guidance's course would make a target behind the bow look past its
+    CPA and be forgotten)."""
+    return max(speed, params.min_target_speed) * np.array([np.cos(course), np.sin(course)])
 
 
 def relevance(params: SbmpcParams, position, v0, tp, tv):
@@ -385,13 +387,18 @@ class Sbmpc:
         tv = np.asarray(velocities if velocities is not None else [], float).reshape(-1, 2)
         pos0 = np.asarray(position, dtype=float)
         v0 = own_velocity(self.params, course, speed, course_ref)
-        keep, _, tcpa0 = relevance(self.params, pos0, v0, tp, tv)
+        keep, range0, tcpa0 = relevance(self.params, pos0, v0, tp, tv)
         encounter_open = bool(np.any(keep & (tcpa0 > 0.0)))
         roles = None
         if ids is not None:
             fresh = np.stack(classify(self.params, v0, tp - pos0, tv), axis=1).reshape(-1, 4)
+            vn = speed_ref * np.array([np.cos(course_ref), np.sin(course_ref)])
+            gone = (range0 > self.params.d_init) | (relevance(self.params, pos0, vn, tp, tv)[2] < 0)
             for i, tid in enumerate(ids):
-                if not keep[i]:
+                # a target that drops out of relevance for a moment (e.g. while the own ship
+                # is stopped) keeps its role and duties unless it is gone or past on the
+                # guidance's (return) course too
+                if not keep[i] and (gone[i] or not self.params.hold_until_clear):
                     self.roles.pop(tid, None)
                 elif tid not in self.roles:
                     self.roles[tid] = fresh[i]
@@ -475,7 +482,6 @@ class Sbmpc:
         port_limit, keep_course, give_way_open = np.inf, False, False
         for i, tid in enumerate(ids):
             if not keep[i]:
-                self.duties.pop(tid, None)
                 continue
             duty = self.duties.setdefault(tid, [self.roles[tid] | sect[i], False, None])
             # past and clear: the CPA is behind on the present course and on the return one
@@ -485,9 +491,10 @@ class Sbmpc:
             head_on, give_way, stand_on, so_cross = duty[0]
             if head_on or give_way:
                 port_limit, give_way_open = min(port_limit, lim), True
-            # near the route's end a far stand-on target no longer holds the course; a close
-            # one still does (a port turn towards it is what Rule 17(c) forbids)
-            if not hold_stand_on and ranges[i] > p.d_close:
+            # near the route's end a far stand-on target, or one already past on the present
+            # course, no longer holds the course; a close one before its CPA still does (a
+            # port turn towards it is what Rule 17(c) forbids)
+            if not hold_stand_on and (ranges[i] > p.d_close or tcpa0[i] < 0.0):
                 continue
             if so_cross and released[i]:
                 duty[2] = rel_now if duty[2] is None else duty[2]

@@ -80,6 +80,9 @@ class SbmpcColav(LeafSystem):
         c, s = np.cos(psi), np.sin(psi)
         vx, vy = u * c - v * s, u * s + v * c  # velocity over ground: SB-MPC works in courses
         sbmpc = state.get_mutable_abstract_state(self._sbmpc).get_value()
+        # nearly stopped, the course over ground is noise: the heading is where the ship points
+        sog = float(np.hypot(vx, vy))
+        course = float(np.arctan2(vy, vx)) if sog > sbmpc.params.min_target_speed else float(psi)
         path = float(self._path.Eval(context)[0]) if self._path.HasValue(context) else None
         hold = not (
             self._end_release is not None
@@ -88,7 +91,7 @@ class SbmpcColav(LeafSystem):
         )
         t0 = time.perf_counter()
         d = sbmpc.decide(
-            [x, y], float(np.arctan2(vy, vx)), float(np.hypot(vx, vy)), float(course_ref),
+            [x, y], course, sog, float(course_ref),
             float(speed_ref), self._tracks.Eval(context),
             path_course=path, hold_stand_on=hold,
         )  # fmt: skip
