@@ -179,3 +179,44 @@ def test_shared_copy_is_independent_once_either_writes():
         other.insert_scan(pose, np.full(90, r), angles, 8.0)
     assert np.array_equal(copy_.log_odds, other.log_odds)
     assert not np.array_equal(grid.log_odds, copy_.log_odds)
+
+
+def test_shared_copy_queues_scans_until_read():
+    """A grid cloned at every update pays one copy per read, not one per inserted scan."""
+    angles = np.linspace(-np.pi, np.pi, 90, endpoint=False)
+    grid = LogOddsGrid((-10.0, -10.0), 0.1, (200, 200))
+    grid.insert_scan((0.0, 0.0, 0.0), np.full(90, 4.0), angles, 8.0)
+    copy_ = grid.shared_copy()
+    ranges = np.full(90, 3.0)
+    for x in (1.0, 2.0, 3.0):
+        copy_ = copy_.shared_copy()  # as Drake's clone at every update
+        copy_.insert_scan((x, 0.0, 0.0), ranges, angles, 8.0)
+    ranges[:] = 1.0  # the caller reuses its array: the queued scans must not change
+    assert np.shares_memory(copy_._sum, grid._sum)  # queued, not yet applied
+    other = LogOddsGrid((-10.0, -10.0), 0.1, (200, 200))
+    for x, r in ((0.0, 4.0), (1.0, 3.0), (2.0, 3.0), (3.0, 3.0)):
+        other.insert_scan((x, 0.0, 0.0), np.full(90, r), angles, 8.0)
+    assert np.array_equal(copy_.log_odds, other.log_odds)
+    assert not np.shares_memory(copy_._sum, grid._sum)
+    assert grid.observed.sum() < copy_.observed.sum()
+
+
+@pytest.mark.parametrize(
+    "occupied_above, free_below", [(0.6, 0.4), (0.5, 0.5), (0.99, 0.01), (0.1, 0.95), (1.0, 0.0)]
+)
+def test_occupancy_grid_classes_equal_the_probability_thresholds(occupied_above, free_below):
+    """The integer-space classification equals thresholding 1 / (1 + exp(−clamped l)), also
+    for thresholds beyond the clamp (p ≈ 0.12 … 0.97)."""
+    rng = np.random.default_rng(3)
+    grid = LogOddsGrid((0.0, 0.0), 0.1, (60, 70))
+    grid._sum[:] = rng.integers(-40000, 50000, size=grid.shape)
+    grid._count[:] = rng.integers(0, 3, size=grid.shape)
+    p = grid.probability()
+    want = np.full(grid.shape, OccupancyGrid.UNKNOWN, np.int8)
+    want[p < free_below] = OccupancyGrid.FREE
+    want[p > occupied_above] = OccupancyGrid.OCCUPIED
+    want[grid._count == 0] = OccupancyGrid.UNKNOWN
+    got = grid.to_occupancy_grid(occupied_above, free_below).data
+    assert np.array_equal(got, want)
+    if 0.12 < free_below <= occupied_above < 0.97:  # thresholds inside the clamp: all three
+        assert set(np.unique(want)) == {-1, 0, 100}
