@@ -329,8 +329,10 @@ def validate_scenario(s: Scenario, file: str | Path = "scenario") -> Scenario:
         raise ConfigError(
             file, "initial_state", "6 numbers [x y psi u v r]", f"{len(s.initial_state)} numbers"
         )
-    if s.nmpc.solver not in ("clarabel", "osqp"):
-        raise ConfigError(file, "nmpc.solver", "'clarabel' or 'osqp'", repr(s.nmpc.solver))
+    if s.nmpc.solver not in ("riccati", "clarabel", "osqp"):
+        raise ConfigError(
+            file, "nmpc.solver", "'riccati', 'clarabel' or 'osqp'", repr(s.nmpc.solver)
+        )
     if s.nmpc.disturbance_source not in ("estimator", "internal"):
         raise ConfigError(
             file,

@@ -13,9 +13,16 @@ feed-forward, as eq. (10a) intends (NOTES.md: penalising raw newtons with u_ref 
 
 **Real-time iteration** (Diehl et al. 2005): each control step linearises (10c) around the
 previous solution shifted by one step (multiple shooting, exact RK4 Jacobians from
-``vessel_discrete``) and solves ONE sparse convex QP. The QP lives in one MathematicalProgram
-built at construction: its Hessian is constant; each step only the linear cost term, the
-dynamics' values (fixed sparsity) and (10b) are updated in place; Clarabel or OSQP solves it.
+``vessel_discrete``) and solves ONE convex QP. By default (``solver="riccati"``) the QP goes, in
+deviations from the linearisation point, straight to :func:`~.ocp_qp.solve_ocp_qp`: an
+interior-point method whose Newton systems are solved by a Riccati recursion over the stages
+(HPIPM's approach, Frison & Diehl 2020), one compiled call per QP; a step it fails (rare: its
+Mehrotra heuristic can cycle) goes to Clarabel on the sparse QP, built then. The reference path
+(``"clarabel"`` / ``"osqp"``) is one sparse MathematicalProgram built at construction: its
+Hessian is constant; each step only the linear cost term, the dynamics' values (fixed sparsity)
+and (10b) are updated in place. The two differ only when q̂ itself violates a velocity bound:
+the sparse QP bounds q_0 too and is then infeasible, the Riccati QP bounds q_1..q_N only (q_0 is
+fixed to q̂ anyway).
 **Full-NLP mode** iterates the same SQP to convergence (a fixed point of SQP is a KKT point of
 the NLP); :func:`solve_nlp_ipopt` solves the NLP itself with IPOPT as an independent reference.
 """
@@ -28,12 +35,14 @@ import scipy.sparse as sp
 from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue, InitializeAutoDiff
 from pydrake.solvers import ClarabelSolver, IpoptSolver, MathematicalProgram, OsqpSolver
 
+from usvdrake.systems.control.ocp_qp import solve_ocp_qp, warm_up
 from usvdrake.systems.vessel.thrusters import configuration_matrix, thrust_envelope
 from usvdrake.systems.vessel.vessel_discrete import rk4, rk4_with_jacobians
 from usvdrake.systems.vessel.vessel_dynamics import coriolis_times_velocity
 from usvdrake.vessel import VesselParams
 
 NX, HEADING = 6, 2
+SOLVERS = ("riccati", "clarabel", "osqp")
 
 
 @dataclass
@@ -53,7 +62,9 @@ class NmpcConfig:
     velocity_bounds: list[float] = field(
         default_factory=lambda: [3.0, 2.0, 2.0]
     )  # [m/s, m/s, rad/s] |u|, |v|, |r| (10d)
-    solver: str = "clarabel"  # QP solver: "clarabel" or "osqp"
+    # QP solver: "riccati" (structure-exploiting interior point, ocp_qp), or "clarabel" / "osqp"
+    # on the sparse MathematicalProgram (the reference)
+    solver: str = "riccati"
     mode: str = "rti"  # "rti": one QP per step; "nlp": SQP iterated to convergence
     nlp_max_iterations: int = 30  # SQP iterations in "nlp" mode
     nlp_tolerance: float = 1e-6  # [-] stop when the step's infinity norm is below this
@@ -94,9 +105,9 @@ class NmpcProblem:
             raise ValueError(
                 "NmpcProblem: azimuth thrusters are not supported (fixed thrusters only)"
             )
-        if cfg.solver not in ("clarabel", "osqp"):
+        if cfg.solver not in SOLVERS:
             raise ValueError(
-                f"NmpcProblem: solver must be 'clarabel' or 'osqp', got {cfg.solver!r}"
+                f"NmpcProblem: solver must be one of {', '.join(SOLVERS)}, got {cfg.solver!r}"
             )
         if not 0.0 <= cfg.update_offset < cfg.dt:
             raise ValueError(
@@ -113,8 +124,21 @@ class NmpcProblem:
         self.u_min = np.array([t.min_force for t in vessel.thrusters])
         self.u_max = np.array([t.max_force for t in vessel.thrusters])
         self.Wq, self.WN, self.Wu = (np.asarray(w, float) for w in (cfg.Wq, cfg.WN, cfg.Wu))
-        self._solver = ClarabelSolver() if cfg.solver == "clarabel" else OsqpSolver()
-        self._build_qp()
+        self.qp_iterations = 0  # interior-point iterations of the last Riccati QP
+        self.qp_fallbacks = 0  # Riccati QPs handed to Clarabel (see _qp_step)
+        self._prog = None
+        # the OCP QP's data in ocp_qp's layout: diagonal weights, boxes (positions unbounded)
+        n = self.N
+        self._Qd = np.vstack([np.tile(self.Wq, (n, 1)), self.WN])
+        self._Rd = np.tile(self.Wu, (n, 1))
+        vb = np.asarray(cfg.velocity_bounds, float)
+        self._ubx = np.tile(np.concatenate([np.full(3, np.inf), vb]), (n + 1, 1))
+        self._lbu, self._ubu = np.tile(self.u_min, (n, 1)), np.tile(self.u_max, (n, 1))
+        if cfg.solver != "riccati":
+            self._solver = ClarabelSolver() if cfg.solver == "clarabel" else OsqpSolver()
+            self._build_qp()
+        else:
+            warm_up()  # load the compiled solver now, not in the first (real-time) step
 
     # --- the QP, built once ------------------------------------------------------------------
     def _build_qp(self) -> None:
@@ -225,15 +249,29 @@ class NmpcProblem:
         tau_bar = u_bar @ self.B_thr.T + d
         q_next, a, bt = rk4_with_jacobians(self.xi, q_bar[:-1], tau_bar, self.dt)
         b = bt @ self.B_thr
-        c = q_next - np.einsum("kij,kj->ki", a, q_bar[:-1]) - np.einsum("kij,kj->ki", b, u_bar)
-        # Drake aborts (not raises) on non-finite coefficients: refuse them here instead.
+        # Drake aborts (not raises) on non-finite coefficients, and the interior point would
+        # only report a numerical failure: refuse them here instead (c is finite if these are).
         if not (
             np.isfinite(a).all()
             and np.isfinite(b).all()
-            and np.isfinite(c).all()
+            and np.isfinite(q_next).all()
+            and np.isfinite(q_bar).all()
+            and np.isfinite(u_bar).all()
             and np.isfinite(q_ref).all()
         ):
             return None, "non-finite linearisation"
+        if self.cfg.solver == "riccati":
+            sol, status = self._riccati_step(q_hat, q_ref, u_ref, q_bar, u_bar, q_next, a, b)
+            if sol is not None:
+                return sol, status
+            # rare (a few steps in HIL runs): the interior point cycled; Clarabel on the
+            # sparse QP, built on first need, takes this step so that the Riccati path never
+            # fails where the reference would not
+            self.qp_fallbacks += 1
+            if self._prog is None:
+                self._solver = ClarabelSolver()
+                self._build_qp()
+        c = q_next - np.einsum("kij,kj->ki", a, q_bar[:-1]) - np.einsum("kij,kj->ki", b, u_bar)
         self._eq.evaluator().UpdateCoefficients(
             self._eq_matrix(a, b), np.concatenate([q_hat, c.ravel()])
         )
@@ -247,6 +285,32 @@ class NmpcProblem:
         if not result.is_success():
             return None, str(result.get_solution_result())
         return (result.GetSolution(self._q), result.GetSolution(self._u)), ""
+
+    def _riccati_step(self, q_hat, q_ref, u_ref, q_bar, u_bar, q_next, a, b):
+        """The same QP in deviations δ from (q̄, ū): δq_{k+1} = A δq_k + B δu_k + (F(q̄_k, ū_k)
+        − q̄_{k+1}), linear costs W (z̄ − z_ref), boxes shifted by z̄. Same solution; the data
+        are small numbers (not positions of hundreds of metres), so the relative tolerance is
+        also an absolute one."""
+        sol = solve_ocp_qp(
+            a,
+            b,
+            q_next - q_bar[1:],
+            q_hat - q_bar[0],
+            self._Qd,
+            self._Qd * (q_bar - q_ref),
+            self._Rd,
+            self._Rd * (u_bar - u_ref),
+            -self._ubx - q_bar,
+            self._ubx - q_bar,
+            self._lbu - u_bar,
+            self._ubu - u_bar,
+        )
+        self.qp_iterations = sol.iterations
+        if not sol.success:
+            return None, f"riccati: {sol.status_text}"
+        q = q_bar + sol.x
+        q[0] = q_hat  # exactly, not q̄_0 + (q̂ − q̄_0) rounded
+        return (q, u_bar + sol.u), ""
 
     # --- the public solve ---------------------------------------------------------------------
     def solve(self, q_hat, q_ref, u_ref, warm=None, disturbance=None) -> NmpcSolution:
