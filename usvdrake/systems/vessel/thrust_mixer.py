@@ -34,8 +34,13 @@ def ThrustMixer_(T):
             self._saturate = saturate
             n = command_size(self._thrusters)
             self._cmd = self.DeclareVectorInputPort("thruster_command", n)
-            self.DeclareVectorOutputPort("tau", 3, self._calc_tau)
-            self.DeclareVectorOutputPort("thrust_applied", n, self._calc_applied)
+            # τ depends on the command alone: cached across the integrator's derivative
+            # evaluations (hundreds per simulated second) while the command holds
+            deps = {self.input_port_ticket(self._cmd.get_index())}
+            self.DeclareVectorOutputPort("tau", 3, self._calc_tau, prerequisites_of_calc=deps)
+            self.DeclareVectorOutputPort(
+                "thrust_applied", n, self._calc_applied, prerequisites_of_calc=deps
+            )
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other._thrusters, other._saturate, converter=converter)
