@@ -48,7 +48,7 @@ import numpy as np
 from numba import njit
 
 from usvdrake.systems.slam.lidar_features import LidarFeatures
-from usvdrake.systems.slam.voxel_map import VoxelMap, voxel_filter
+from usvdrake.systems.slam.voxel_map import VoxelMap, moved_rows, voxel_filter
 
 
 @dataclass
@@ -378,10 +378,8 @@ def fit_neighbourhoods(
         return np.zeros(0, int), z, z, z
     q = np.ascontiguousarray(q, dtype=float)
     st = state if state is not None else _Neighbourhoods(len(q), k)
-    moved = np.einsum("ij,ij->i", q - st.anchor, q - st.anchor)
-    rows = np.flatnonzero((st.tau < 0) | (moved >= st.tau * np.abs(st.tau)))
+    rows = moved_rows(q, st.anchor, st.tau)
     fmap.knn_update(line, q, rows, k, radius, params.reuse_margin, st.idx, st.ok, st.tau)
-    st.anchor[rows] = q[rows]
     _fit_kernel(
         fmap.table(line), st.idx, st.ok, rows, line,
         float(params.line_ratio), float(params.plane_spread) ** 2, float(params.plane_threshold),

@@ -261,6 +261,21 @@ def _knn_kernel(q, rows, k, radius, extra, side, offsets, lb2, ckeys, chead, nxt
             tau[m] = nxt_d - radius
 
 
+@njit(cache=True)
+def moved_rows(q, anchor, tau):
+    """The rows of q to search again: no answer yet (tau < 0) or moved at least tau since
+    their anchor (the tau of :meth:`VoxelMap.knn_update`); their anchors become q."""
+    rows = np.empty(len(q), dtype=np.int64)
+    n = 0
+    for i in range(len(q)):
+        dx, dy, dz = q[i, 0] - anchor[i, 0], q[i, 1] - anchor[i, 1], q[i, 2] - anchor[i, 2]
+        if tau[i] < 0 or dx * dx + dy * dy + dz * dz >= tau[i] * abs(tau[i]):
+            rows[n] = i
+            n += 1
+            anchor[i, 0], anchor[i, 1], anchor[i, 2] = q[i, 0], q[i, 1], q[i, 2]
+    return rows[:n]
+
+
 class _Layer:
     """One voxel hash (edges or planes): entries (sum, count, centroid), voxel → entry table,
     cell → first entry table, per-entry next pointer."""
