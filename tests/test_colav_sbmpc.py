@@ -210,3 +210,44 @@ def test_an_unreleased_stand_on_ship_keeps_the_route_course():
     assert s.roles[6][2] and 6 not in s.released
     heading = np.degrees(route - np.radians(30.0) + d.course_offset - route)
     assert abs(heading) <= SbmpcParams().port_limit_deg + 1e-9
+
+
+def _track(tid, pos, vel):
+    return Track(tid, 0.0, np.asarray(pos, float), np.asarray(vel, float), np.eye(4), 0.0, 3)
+
+
+def test_stand_on_before_release_owes_no_crossing_ahead_cost():
+    # A ship crossing from port, a little slower, on a near-collision course 15 min out: the own
+    # ship is stand-on and not yet released (6.2 km, TCPA > 0.6 horizon), so it keeps course and
+    # speed even though holding on passes ahead of the target's bow (Rule 17(a)(i)); the
+    # crossing-ahead cost is the give-way ship's (Rule 15).
+    tc = 900.0
+    tgt = _track(4, [-0.9 * U * tc, U * tc], [0.9 * U, 0.0])
+    d = Sbmpc().decide([0.0, 0.0], NORTH, U, NORTH, U, [tgt])
+    assert d.active and (d.course_offset, d.speed_factor) == (0.0, 1.0)
+
+
+def test_shallow_crossing_from_starboard_is_given_way_early():
+    # Faster, 45° apart, from starboard: the paper's angles call it "overtaking us" (stand-on,
+    # no collision cost until 1 nmi), DNV's sectors a give-way crossing; with duties held the
+    # give-way reading wins and the own ship acts now, 2.5 nmi out.
+    heading = NORTH + np.radians(45.0)  # towards north-west
+    v = 1.3 * U * np.array([np.cos(heading), np.sin(heading)])
+    tc = 900.0
+    tgt = _track(5, np.array([0.0, U * tc]) - v * tc, v)
+    held = Sbmpc().decide([0.0, 0.0], NORTH, U, NORTH, U, [tgt])
+    assert held.course_offset < 0.0 or held.speed_factor < 1.0
+    older = Sbmpc(SbmpcParams(hold_until_clear=False))
+    off = older.decide([0.0, 0.0], NORTH, U, NORTH, U, [tgt])
+    assert (off.course_offset, off.speed_factor) == (0.0, 1.0)  # the paper's roles stand on
+
+
+def test_a_target_briefly_irrelevant_keeps_its_duty():
+    # A give-way crossing target looks past its CPA for a moment (the own ship stopped and
+    # pointing away) but not on the guidance's course: its role is kept, not re-classified.
+    s = Sbmpc()
+    tgt = _track(6, [3000.0, 3000.0], [-U, 0.0])  # from starboard, heading west
+    s.decide([0.0, 0.0], NORTH, U, NORTH, U, [tgt])
+    assert s.roles[6][1]  # give-way crossing
+    s.decide([0.0, 0.0], -NORTH, 0.01, NORTH, U, [_track(6, [-1000.0, 3000.0], [-U, 0.0])])
+    assert 6 in s.roles and s.roles[6][1]
