@@ -118,8 +118,8 @@ class SbmpcParams:
     # the course held at the release (Rule 17(c)); an unreleased stand-on target keeps the
     # course within ``port_limit_deg`` of the route's while no give-way duty is open (Rule
     # 17(a)(i)). False: the older rule (SB-MPC's roles, open until the present course's CPA).
-    # On by default since run d6 (docs/experiments/colav-tuning.md): compliance DNV 81.1 →
-    # 92.6 %, canal 60 → 89.1 %, at the price of one DNV path at 1.355 × the route (31).
+    # On by default since run d6 (docs/experiments/colav-tuning.md, runs d0-d9): compliance
+    # DNV 81.1 → 92.6 %, canal 60 → 96.4 %, every DNV path within 1.2 × the route.
     hold_until_clear: bool = True
     # the stand-on crossing port limit from the course held at the release even when that is to
     # starboard of the route (True: the evaluation's reading of Rule 17(c); False: from the
