@@ -26,8 +26,7 @@ from usvdrake.logs.carmen import read_carmen
 from usvdrake.systems.slam import plicp_kernel as kernel
 from usvdrake.systems.slam.graph_slam.poses import between
 from usvdrake.systems.slam.plicp import GRID_CELL, plicp, plicp_reference
-from usvdrake.worlds.raycast import cast
-from usvdrake.worlds.synthetic import HOKUYO, cluttered_room
+from usvdrake.worlds.synthetic import noisy_scan_pairs
 
 INTEL = Path(__file__).parent.parent / "tests" / "data" / "carmen" / "intel-first200.clf.bz2"
 
@@ -42,20 +41,9 @@ def intel_pairs() -> list:
 
 
 def room_pairs(count: int, seed: int = 0) -> list:
-    scene, rng = cluttered_room(), np.random.default_rng(seed)
     out = []
-    for _ in range(count):
-        p1 = np.array([rng.uniform(-3, 3), rng.uniform(-2, 2), rng.uniform(-np.pi, np.pi)])
-        d, ang = rng.uniform(0, 0.5), rng.uniform(0, 2 * np.pi)
-        p2 = p1 + [d * np.cos(ang), d * np.sin(ang), rng.uniform(-0.17, 0.17)]
-        pts = []
-        for p in (p1, p2):
-            r = cast(scene, HOKUYO, [0.0], p[:2], 1.0, p[2], 30.0)[0]
-            ok = np.isfinite(r)
-            r = r[ok] + rng.normal(0.0, 0.01, ok.sum())
-            a = HOKUYO.azimuths[ok]
-            pts.append(np.column_stack([r * np.cos(a), r * np.sin(a)]))
-        out += [(pts[0], pts[1], (0.0, 0.0, 0.0)), (pts[0], pts[1], tuple(between(p1, p2)))]
+    for a, b, p1, p2 in noisy_scan_pairs(count, seed):
+        out += [(a, b, (0.0, 0.0, 0.0)), (a, b, tuple(between(p1, p2)))]
     return out
 
 

@@ -20,8 +20,7 @@ from usvdrake.systems.slam.plicp import (
     rot,
     solve_point_to_line,
 )
-from usvdrake.worlds.raycast import cast
-from usvdrake.worlds.synthetic import HOKUYO, cluttered_room
+from usvdrake.worlds.synthetic import noisy_scan_pairs
 
 DATA = Path(__file__).parent / "data" / "carmen"
 
@@ -46,21 +45,7 @@ def intel():
 def noisy_scans(count, seed):
     """Pairs of 1081-beam scans of the cluttered room, ranges with 1 cm noise, poses 0-0.5 m /
     0-10° apart: (reference points, current points, true relative pose)."""
-    scene, rng = cluttered_room(), np.random.default_rng(seed)
-    out = []
-    for _ in range(count):
-        p1 = np.array([rng.uniform(-3, 3), rng.uniform(-2, 2), rng.uniform(-np.pi, np.pi)])
-        d, ang = rng.uniform(0, 0.5), rng.uniform(0, 2 * np.pi)
-        p2 = p1 + [d * np.cos(ang), d * np.sin(ang), rng.uniform(-0.17, 0.17)]
-        pts = []
-        for p in (p1, p2):
-            r = cast(scene, HOKUYO, [0.0], p[:2], 1.0, p[2], 30.0)[0]
-            ok = np.isfinite(r)
-            r = r[ok] + rng.normal(0.0, 0.01, ok.sum())
-            a = HOKUYO.azimuths[ok]
-            pts.append(np.column_stack([r * np.cos(a), r * np.sin(a)]))
-        out.append((pts[0], pts[1], between(p1, p2)))
-    return out
+    return [(a, b, between(p1, p2)) for a, b, p1, p2 in noisy_scan_pairs(count, seed)]
 
 
 @pytest.mark.parametrize("gap", [1, 2, 5])

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from usvdrake.worlds.raycast import ColumnLayout, Scene
+from usvdrake.worlds.raycast import ColumnLayout, Scene, cast
 from usvdrake.worlds.solids import box, cylinder
 
 # The Hokuyo UTM-30LX beam layout: 270°, 0.25°, 1081 beams.
@@ -26,3 +26,24 @@ def cluttered_room() -> Scene:
             cylinder("post", -8, 2, 0.4, -1, 3),
         ]
     )
+
+
+def noisy_scan_pairs(count: int, seed: int = 0, noise: float = 0.01) -> list[tuple]:
+    """``count`` pairs of Hokuyo scans of :func:`cluttered_room` from poses 0-0.5 m and 0-10°
+    apart, ranges with ``noise`` [m] Gaussian noise: (points 1 (N × 2), points 2 (M × 2), pose 1,
+    pose 2), points in each scan's sensor frame, poses (x, y, θ) in the room."""
+    scene, rng = cluttered_room(), np.random.default_rng(seed)
+    out = []
+    for _ in range(count):
+        p1 = np.array([rng.uniform(-3, 3), rng.uniform(-2, 2), rng.uniform(-np.pi, np.pi)])
+        d, ang = rng.uniform(0, 0.5), rng.uniform(0, 2 * np.pi)
+        p2 = p1 + [d * np.cos(ang), d * np.sin(ang), rng.uniform(-0.17, 0.17)]
+        pts = []
+        for p in (p1, p2):
+            r = cast(scene, HOKUYO, [0.0], p[:2], 1.0, p[2], 30.0)[0]
+            ok = np.isfinite(r)
+            r = r[ok] + rng.normal(0.0, noise, ok.sum())
+            a = HOKUYO.azimuths[ok]
+            pts.append(np.column_stack([r * np.cos(a), r * np.sin(a)]))
+        out.append((pts[0], pts[1], p1, p2))
+    return out

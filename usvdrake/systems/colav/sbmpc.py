@@ -234,7 +234,7 @@ def classify(params, own_velocity, rel_position, target_velocity):
     return head_on, give_way_crossing, stand_on, stand_on_crossing
 
 
-def own_velocity(params: SbmpcParams, course, speed, course_ref) -> np.ndarray:
+def own_velocity(params: SbmpcParams, course, speed) -> np.ndarray:
     """The own velocity the roles are judged from: along ``course`` at least at
     ``min_target_speed`` (a caller whose ship is nearly stopped passes its heading as the course:
     ``SbmpcColav`` does; the guidance's course would make a target behind the bow look past its
@@ -301,7 +301,7 @@ def hazard(
     if tp.shape[0] == 0:
         return f + g, np.full(chi_k.size, np.inf)
     pos0 = np.asarray(position, dtype=float)
-    v0 = own_velocity(params, course, speed, course_ref)
+    v0 = own_velocity(params, course, speed)
     keep, range0, tcpa0 = relevance(params, pos0, v0, tp, tv)
     if not np.any(keep):
         return f + g, np.full(chi_k.size, np.inf)
@@ -386,14 +386,15 @@ class Sbmpc:
         tp = np.asarray(positions if positions is not None else [], float).reshape(-1, 2)
         tv = np.asarray(velocities if velocities is not None else [], float).reshape(-1, 2)
         pos0 = np.asarray(position, dtype=float)
-        v0 = own_velocity(self.params, course, speed, course_ref)
+        v0 = own_velocity(self.params, course, speed)
         keep, range0, tcpa0 = relevance(self.params, pos0, v0, tp, tv)
         encounter_open = bool(np.any(keep & (tcpa0 > 0.0)))
         roles = None
         if ids is not None:
             fresh = np.stack(classify(self.params, v0, tp - pos0, tv), axis=1).reshape(-1, 4)
             vn = speed_ref * np.array([np.cos(course_ref), np.sin(course_ref)])
-            gone = (range0 > self.params.d_init) | (relevance(self.params, pos0, vn, tp, tv)[2] < 0)
+            tcpa_nominal = relevance(self.params, pos0, vn, tp, tv)[2]  # on the return course
+            gone = (range0 > self.params.d_init) | (tcpa_nominal < 0)
             for i, tid in enumerate(ids):
                 # a target that drops out of relevance for a moment (e.g. while the own ship
                 # is stopped) keeps its role and duties unless it is gone or past on the
@@ -404,7 +405,10 @@ class Sbmpc:
                     self.roles[tid] = fresh[i]
             roles = np.array([self.roles.get(tid, fresh[i]) for i, tid in enumerate(ids)])
             if self.params.hold_until_clear:
-                roles = self._hazard_roles(ids, roles, v0, tp - pos0, tv)
+                sect = np.stack(
+                    classify_sectors(v0, tp - pos0, tv, self.params.min_target_speed), axis=1
+                )
+                roles = self._hazard_roles(ids, roles, sect)
             now = stand_on_released(self.params, pos0, v0, tp, tv)
             self.released = {tid for tid in self.released if tid in self.roles}
             self.released |= {tid for i, tid in enumerate(ids) if keep[i] and now[i]}
@@ -422,7 +426,7 @@ class Sbmpc:
         if roles is not None and self.params.hold_until_clear:
             ref = course_ref if path_course is None else path_course
             duty = self._duty_costs(
-                ids, keep, tcpa0, pos0, v0, tp, tv, course, course_ref, speed_ref, ref,
+                ids, keep, tcpa0, tcpa_nominal, sect, pos0, tp, course, course_ref, ref,
                 released, hold_stand_on,
             )  # fmt: skip
             # the duties yield to safety (Rule 2(b), "if the circumstances of the case admit"):
@@ -450,15 +454,14 @@ class Sbmpc:
             encounter_open=encounter_open,
         )
 
-    def _hazard_roles(self, ids, roles, v0, rel, tv) -> np.ndarray:
+    def _hazard_roles(self, ids, roles, sect) -> np.ndarray:
         """The roles the hazard uses with ``hold_until_clear``: a head-on or give-way duty by
         either classification (the paper's angles or DNV's sectors, latched in ``duties``)
         wins over the paper's stand-on, so that a ship crossing from starboard at a shallow
         angle, "overtaking" by the paper's angles, is not held as a stand-on target (no
-        collision cost) until it is 1 nmi away."""
+        collision cost) until it is 1 nmi away. sect: (M, 4) DNV's sector roles now."""
         if len(ids) == 0:
             return roles
-        sect = np.stack(classify_sectors(v0, rel, tv, self.params.min_target_speed), axis=1)
         union = np.array(
             [self.duties[tid][0] if tid in self.duties else roles[i] | sect[i]
              for i, tid in enumerate(ids)], dtype=bool,
@@ -467,15 +470,12 @@ class Sbmpc:
         return np.column_stack([union[:, 0], union[:, 1], roles[:, 2] & ~duty, roles[:, 3] & ~duty])
 
     def _duty_costs(
-        self, ids, keep, tcpa0, pos0, v0, tp, tv, course, course_ref, speed_ref, ref, released,
+        self, ids, keep, tcpa0, tcpa_nominal, sect, pos0, tp, course, course_ref, ref, released,
         hold_stand_on=True,
     ) -> np.ndarray:  # fmt: skip
         """(S,) ``k_forbidden`` for every behaviour that breaks an open duty (``hold_until_clear``):
         updates ``self.duties`` (first relevance: the union of the paper's and DNV's roles)."""
         p = self.params
-        sect = np.stack(classify_sectors(v0, tp - pos0, tv, p.min_target_speed), axis=1)
-        vn = speed_ref * np.array([np.cos(course_ref), np.sin(course_ref)])
-        _, _, tcpa_nominal = relevance(p, pos0, vn, tp, tv)
         lim = np.radians(p.port_limit_deg)
         rel_now = float(wrap_angle(course - ref))
         ranges = np.linalg.norm(tp - pos0, axis=1)

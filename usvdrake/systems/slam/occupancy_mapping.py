@@ -211,13 +211,37 @@ class LogOddsGrid:
         return l0 < self.l_min or (l0 < self.l_max and self._sum > l0 / _QUANTUM)
 
     def _update(self, pose, ranges, angles, max_range: float, sign: int) -> None:
-        ranges = np.array(ranges, dtype=float)  # copies: the caller may reuse its arrays
-        angles = np.array(np.broadcast_to(np.asarray(angles, dtype=float), ranges.shape))
-        if _window_cells(self, pose, ranges, angles, max_range) >= 2**31:  # int32 window index
+        rays = self._ray_cells(pose, ranges, angles, max_range)
+        if rays is None:
+            return
+        c0, r0, c1, r1, _ = rays
+        rmin, rmax = min(r0, int(r1.min())), max(r0, int(r1.max()))
+        cmin, cmax = min(c0, int(c1.min())), max(c0, int(c1.max()))
+        if (rmax - rmin + 1) * (cmax - cmin + 1) >= 2**31:  # window-flat indices are int32
             raise ValueError("scan window too large: lower max_range or coarsen resolution")
-        self._pending.append((tuple(float(v) for v in pose), ranges, angles, max_range, sign))
+        self._pending.append((*rays, sign))
         if len(self._pending) >= MAX_PENDING:
             self._flush()
+
+    def _ray_cells(self, pose, ranges, angles, max_range: float):
+        """(c0, r0, c1, r1, hit) of a scan: the sensor's cell, each usable ray's end cell and
+        whether it hit; None without a usable ray. New arrays: the caller may reuse its own."""
+        x, y, theta = (float(v) for v in pose)
+        ranges = np.asarray(ranges, dtype=float)
+        angles = np.broadcast_to(np.asarray(angles, dtype=float), ranges.shape)
+        use = ranges > 0.0  # NaN compares False
+        ranges, angles = ranges[use], angles[use]
+        if ranges.size == 0:
+            return None
+        hit = ranges < max_range
+        length = np.where(hit, ranges, max_range)
+        bearing = theta + angles
+        res, (ox, oy) = self.resolution, self.origin
+        c0 = int(np.floor((x - ox) / res))
+        r0 = int(np.floor((y - oy) / res))
+        c1 = np.floor((x + length * np.cos(bearing) - ox) / res).astype(np.int64)
+        r1 = np.floor((y + length * np.sin(bearing) - oy) / res).astype(np.int64)
+        return c0, r0, c1, r1, hit
 
     def _flush(self) -> None:
         """Apply the queued scans (the integer sums commute: order does not matter)."""
@@ -229,20 +253,7 @@ class LogOddsGrid:
         for op in pending:
             self._apply(*op)
 
-    def _apply(self, pose, ranges, angles, max_range: float, sign: int) -> None:
-        x, y, theta = pose
-        use = ranges > 0.0  # NaN compares False
-        ranges, angles = ranges[use], angles[use]
-        if ranges.size == 0:
-            return
-        hit = ranges < max_range
-        length = np.where(hit, ranges, max_range)
-        bearing = theta + angles
-        res, (ox, oy) = self.resolution, self.origin
-        c0 = int(np.floor((x - ox) / res))
-        r0 = int(np.floor((y - oy) / res))
-        c1 = np.floor((x + length * np.cos(bearing) - ox) / res).astype(np.int64)
-        r1 = np.floor((y + length * np.sin(bearing) - oy) / res).astype(np.int64)
+    def _apply(self, c0: int, r0: int, c1, r1, hit, sign: int) -> None:
         # Cells are marked in the scan's bounding window (lines stay inside their end points'
         # box) so that each is updated once per scan; then the window is cut to the grid.
         rmin, rmax = min(r0, int(r1.min())), max(r0, int(r1.max()))
@@ -278,17 +289,3 @@ class LogOddsGrid:
         self._sum[window] += delta
         np.take(np.array([0, sign, sign], np.int32), mark, out=delta)
         self._count[window] += delta
-
-
-def _window_cells(grid: LogOddsGrid, pose, ranges, angles, max_range: float) -> int:
-    """Cells of the bounding window of a scan's rays (what ``_apply`` indexes in int32)."""
-    x, y, theta = (float(v) for v in pose)
-    use = ranges > 0.0
-    if not use.any():
-        return 0
-    length = np.where(ranges[use] < max_range, ranges[use], max_range)
-    bearing = theta + angles[use]
-    res, (ox, oy) = grid.resolution, grid.origin
-    c = np.floor((np.append(x + length * np.cos(bearing), x) - ox) / res)
-    r = np.floor((np.append(y + length * np.sin(bearing), y) - oy) / res)
-    return int((r.max() - r.min() + 1) * (c.max() - c.min() + 1))
