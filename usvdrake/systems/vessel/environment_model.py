@@ -25,6 +25,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
 from usvdrake.random_streams import white_sample
 from usvdrake.vessel import VesselParams
@@ -130,6 +131,8 @@ class EnvironmentModel:
         self.area_frontal = hull.beam * freeboard
         self.area_lateral = hull.length * freeboard
         self.waves = make_waves(cfg.waves, seed) if cfg.waves.significant_height > 0 else None
+        self._wave_gain = None  # amplitude ω², made at the first wave force
+        self._no_wind = cfg.wind.mean_speed == 0.0 and cfg.wind.gust_std == 0.0
 
     def step_processes(self, gust: float, current_var: float, k: int) -> tuple[float, float]:
         """Advance (gust, current variation) by one update period, step index k."""
@@ -156,51 +159,92 @@ class EnvironmentModel:
         return (c.speed + current_var) * np.array([np.cos(b), np.sin(b)])
 
     def wind_force(self, q: np.ndarray, gust: float) -> np.ndarray:
-        """Wind force/moment [N, N, N m] in the body frame."""
-        w = self.cfg.wind
-        speed = w.mean_speed + gust
-        if w.mean_speed == 0.0 and w.gust_std == 0.0:
+        """Wind force/moment [N, N, N m] in the body frame (zero when no wind is configured: no
+        air drag on the boat's own motion either)."""
+        if self._no_wind:
             return np.zeros(3)
-        # scalar math: the plant asks for this at every integrator stage (~1000 times per s)
-        b = math.radians(w.direction_deg)
-        psi = float(q[2])
-        c, s = math.cos(psi), math.sin(psi)
-        vw0, vw1 = speed * math.cos(b), speed * math.sin(b)
-        u_rw = float(q[3]) - (c * vw0 + s * vw1)
-        v_rw = float(q[4]) - (-s * vw0 + c * vw1)
-        v_rel = math.hypot(u_rw, v_rw)
-        k = 0.5 * w.air_density
-        return np.array(
-            [
-                -k * w.cx * self.area_frontal * u_rw * v_rel,
-                -k * w.cy * self.area_lateral * v_rw * v_rel,
-                k * w.cn * self.area_lateral * self.vessel.hull.length * u_rw * v_rw,
-            ]
-        )
+        return np.array(_wind_force(*self._wind_args(q, gust)))
 
     def wave_force(self, q: np.ndarray, t: float) -> np.ndarray:
         """First-order wave force/moment [N, N, N m] in the body frame (two-strip inertia model)."""
         if self.waves is None:
             return np.zeros(3)
-        h, waves = self.vessel.hydrodynamics, self.waves
-        psi = float(q[2])
-        c, s = math.cos(psi), math.sin(psi)
-        half = 0.25 * self.vessel.hull.length
-        d0, d1 = math.cos(waves.direction), math.sin(waves.direction)
-        # both strips (bow x = +L/4, stern x = −L/4) in one evaluation of the spectrum's
-        # components; the same sum as wave_acceleration at each strip's point
-        along = d0 * float(q[0]) + d1 * float(q[1])
-        offset = half * (d0 * c + d1 * s)
-        theta = waves.wavenumber * np.array([[along + offset], [along - offset]])
-        theta += waves.phase - waves.omega * t
-        mag = np.sin(theta) @ (waves.amplitude * waves.omega**2)
-        tau = np.zeros(3)
-        for x_strip, m in ((half, float(mag[0])), (-half, float(mag[1]))):
-            ax, ay = m * d0, m * d1
-            f0 = 0.5 * h.m11 * (c * ax + s * ay)
-            f1 = 0.5 * h.m22 * (-s * ax + c * ay)
-            tau += (f0, f1, x_strip * f1)
-        return tau
+        return np.array(_wave_force(*self._wave_args(q, t)))
 
     def tau_env(self, q: np.ndarray, t: float, gust: float) -> np.ndarray:
-        return self.wind_force(q, gust) + self.wave_force(q, t)
+        """Wind + waves in one compiled call (the plant asks at every integrator stage)."""
+        if self.waves is None or self._no_wind:
+            return self.wind_force(q, gust) + self.wave_force(q, t)
+        w = _wind_force(*self._wind_args(q, gust))
+        f = _wave_force(*self._wave_args(q, t))
+        return np.array((w[0] + f[0], w[1] + f[1], w[2] + f[2]))
+
+    def _wind_args(self, q, gust):
+        w = self.cfg.wind
+        speed = w.mean_speed + gust
+        b = math.radians(w.direction_deg)
+        k = 0.5 * w.air_density
+        return (
+            float(q[2]),
+            float(q[3]),
+            float(q[4]),
+            speed * math.cos(b),
+            speed * math.sin(b),
+            k * w.cx * self.area_frontal,
+            k * w.cy * self.area_lateral,
+            k * w.cn * self.area_lateral * self.vessel.hull.length,
+        )
+
+    def _wave_args(self, q, t):
+        h, waves = self.vessel.hydrodynamics, self.waves
+        if self._wave_gain is None:
+            self._wave_gain = waves.amplitude * waves.omega**2
+        return (
+            float(q[0]),
+            float(q[1]),
+            float(q[2]),
+            float(t),
+            0.25 * self.vessel.hull.length,
+            waves.direction,
+            waves.wavenumber,
+            waves.phase,
+            waves.omega,
+            self._wave_gain,
+            h.m11,
+            h.m22,
+        )
+
+
+@njit(cache=True)
+def _wind_force(psi, u, v, vw0, vw1, kx, ky, kn):
+    """Wind force in velocity components (see the module docstring): u_rw, v_rw relative air."""
+    c, s = math.cos(psi), math.sin(psi)
+    u_rw = u - (c * vw0 + s * vw1)
+    v_rw = v - (-s * vw0 + c * vw1)
+    v_rel = math.hypot(u_rw, v_rw)
+    return -kx * u_rw * v_rel, -ky * v_rw * v_rel, kn * u_rw * v_rw
+
+
+@njit(cache=True)
+def _wave_force(x, y, psi, t, half, direction, wavenumber, phase, omega, gain, m11, m22):
+    """Both strips (bow x = +L/4, stern x = −L/4) in one pass over the spectrum's components;
+    the same sum as wave_acceleration at each strip's point, times half the inertia each."""
+    c, s = math.cos(psi), math.sin(psi)
+    d0, d1 = math.cos(direction), math.sin(direction)
+    along = d0 * x + d1 * y
+    offset = half * (d0 * c + d1 * s)
+    bow = 0.0
+    stern = 0.0
+    for i in range(wavenumber.shape[0]):
+        base = phase[i] - omega[i] * t
+        bow += gain[i] * math.sin(wavenumber[i] * (along + offset) + base)
+        stern += gain[i] * math.sin(wavenumber[i] * (along - offset) + base)
+    tau0 = tau1 = tau2 = 0.0
+    for x_strip, m in ((half, bow), (-half, stern)):
+        ax, ay = m * d0, m * d1
+        f0 = 0.5 * m11 * (c * ax + s * ay)
+        f1 = 0.5 * m22 * (-s * ax + c * ay)
+        tau0 += f0
+        tau1 += f1
+        tau2 += x_strip * f1
+    return tau0, tau1, tau2
