@@ -162,6 +162,40 @@ def test_noiseless_measurements_converge_to_truth():
     assert max(abs(s.bias).max() for s in sols) < 1e-2  # no fake disturbance learnt
 
 
+def test_condensed_solve_is_clarabels_answer():
+    """The default solve (bounds left out, condensed, one Cholesky) gives the interior point's
+    estimates on the noisy run, with and without IMU interval means in the window."""
+    _, z, u, est, sols = noisy_run()
+    assert all(s.status == "condensed" for s in sols[1:])
+    clarabel = NmheConfig(thrust_delay_samples=0, solver="clarabel")
+    est_c, sols_c = run_nmhe(z, u, clarabel)
+    np.testing.assert_allclose(est, est_c, rtol=0, atol=1e-7)
+    np.testing.assert_allclose([s.bias for s in sols], [s.bias for s in sols_c], rtol=0, atol=1e-6)
+    assert [s.cost for s in sols[1:]] == pytest.approx([s.cost for s in sols_c[1:]], rel=1e-6)
+    rng = np.random.default_rng(5)
+    imu = np.column_stack([0.05 * rng.standard_normal((20, 2)), 0.01 * rng.standard_normal(20)])
+    window = (z[100:120], u[100:120], est[100], est[100:120])
+    a = NmheProblem(XI, ROBOAT.thrusters, NmheConfig(thrust_delay_samples=0))
+    b = NmheProblem(XI, ROBOAT.thrusters, clarabel)
+    sa, sb = (p.solve(*window, sols[119].bias, imu_window=imu) for p in (a, b))
+    assert sa.status == "condensed" and sb.status != "condensed"
+    np.testing.assert_allclose(sa.trajectory, sb.trajectory, rtol=0, atol=1e-7)
+    np.testing.assert_allclose(sa.accel_bias, sb.accel_bias, rtol=0, atol=1e-7)
+
+
+def test_condensed_solve_hands_an_active_bound_to_clarabel():
+    """A surge bound below the boat's speed (0.6 m/s) is active: the condensed minimiser
+    breaks it, so the interior point solves those windows, and the estimates obey it."""
+    _, z, u, _, _ = noisy_run()
+    bound = {"thrust_delay_samples": 0, "velocity_max": [0.55, 2.0, 2.0]}
+    est, sols = run_nmhe(z[:60], u[:60], NmheConfig(**bound))
+    est_c, _ = run_nmhe(z[:60], u[:60], NmheConfig(**bound, solver="clarabel"))
+    assert all(s.success for s in sols)
+    assert sum(s.status != "condensed" for s in sols) >= 30
+    assert np.all(est[:, 3] <= 0.55 + 1e-6)
+    np.testing.assert_allclose(est, est_c, rtol=0, atol=1e-6)
+
+
 def test_heading_wraparound_causes_no_jump():
     n = 250
     f = np.tile([8.0, 15.0, 0.0, 0.0], (n, 1))  # a steady turn, ~0.13 rad/s: ψ crosses ±π
@@ -399,7 +433,8 @@ class FailingSolver:
 
 @pytest.mark.parametrize("raise_error", [False, True])
 def test_failed_solves_are_counted_and_the_estimate_coasts(raise_error):
-    nmhe = Nmhe(ROBOAT, NmheConfig(), initial_state=Q0)
+    # the interior-point path (the condensed solve never calls Clarabel with inactive bounds)
+    nmhe = Nmhe(ROBOAT, NmheConfig(solver="clarabel"), initial_state=Q0)
     diagram, nmhe, logs = build_diagram(nmhe=nmhe)
     ok_ctx, ok = run_diagram(diagram, logs, 1.0)
     nmhe.problem._solver = FailingSolver(raise_error)

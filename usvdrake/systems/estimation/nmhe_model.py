@@ -65,7 +65,8 @@ class NmheConfig:
     # 1: the thrust sample taken at t_k is the force held over [t_{k−1}, t_k) (the sensor and a
     # 10 Hz controller update at the same instants); 0: it is the force over [t_k, t_{k+1})
     thrust_delay_samples: int = 1
-    solver: str = "clarabel"  # "clarabel" or "osqp" (both ship with Drake)
+    # "condensed" (exact when no velocity bound is active, else Clarabel), "clarabel" or "osqp"
+    solver: str = "condensed"
     # [s] ``Nmhe`` updates this long after the instants k·dt at which its sensors sample (its
     # compute slot, after the sensors' and before the controller's), so it reads the samples
     # just taken; 0: at the same instants, when it reads the samples of the instant before

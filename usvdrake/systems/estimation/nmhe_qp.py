@@ -8,6 +8,7 @@ it also adds the linearised IMU terms to the cost. ``NmheProblem`` derives from 
 """
 
 import numpy as np
+import scipy.linalg as sla
 import scipy.sparse as sp
 from pydrake.solvers import ClarabelSolver, MathematicalProgram, OsqpSolver
 
@@ -92,7 +93,7 @@ class NmheQp:
         self._e = self._prog.NewContinuousVariables(M - 1, 3, "e")
         self._db = self._prog.NewContinuousVariables(3, "db")
         self._dba = self._prog.NewContinuousVariables(2, "dba")
-        x = np.concatenate([self._dq.ravel(), self._e.ravel(), self._db, self._dba])
+        self._x = x = np.concatenate([self._dq.ravel(), self._e.ravel(), self._db, self._dba])
         self._cost = self._prog.AddQuadraticCost(np.eye(n), np.zeros(n), x, is_convex=True)
         self._rows, self._cols = self._dynamics_pattern()
         a0 = sp.csc_matrix(
@@ -106,12 +107,15 @@ class NmheQp:
             np.where(self._bias_on, -np.inf, 0.0), np.where(self._bias_on, np.inf, 0.0), self._db
         )
         self._accel_bias_box = self._prog.AddBoundingBoxConstraint(0.0, 0.0, self._dba)
-        if cfg.solver == "clarabel":
-            self._solver = ClarabelSolver()
-        elif cfg.solver == "osqp":
+        if cfg.solver == "osqp":
             self._solver = OsqpSolver()  # Drake's settings (polished) match Clarabel's answer
+        elif cfg.solver in ("condensed", "clarabel"):
+            # Clarabel is also the condensed solve's fallback when a velocity bound is active
+            self._solver = ClarabelSolver()
         else:
-            raise ValueError(f"NmheConfig.solver must be 'clarabel' or 'osqp', got {cfg.solver!r}")
+            raise ValueError(
+                f"NmheConfig.solver must be 'condensed', 'clarabel' or 'osqp', got {cfg.solver!r}"
+            )
 
     def _dynamics_pattern(self) -> tuple[np.ndarray, np.ndarray]:
         """(rows, cols) of the dynamics' nonzeros in the order :meth:`solve` fills them: per step
@@ -168,3 +172,51 @@ class NmheQp:
             grad[ib] -= 2.0 * (w[:, :2] * rho[:, :2]).sum(axis=0)
             const += float(np.sum(w * rho * rho))
         return const
+
+    def _solve_condensed(
+        self,
+        hess: np.ndarray,
+        grad: np.ndarray,
+        a: np.ndarray,
+        b: np.ndarray,
+        c: np.ndarray,
+        q_bar: np.ndarray,
+        free_b: np.ndarray,
+        free_a: bool,
+    ) -> np.ndarray | None:
+        """The QP's minimiser x when no velocity bound (15c) is active, else None.
+
+        The dynamics δq_{k+1} = A_k δq_k + B_k (e_k + δb) + c_k fix every δq_k from
+        z = [δq_0, e, δb, δb_a] (condensing: x = T z + t), so without the bounds the QP is the
+        unconstrained ½ zᵀ Tᵀ H T z + (Tᵀ (H t + g))ᵀ z, solved by one Cholesky factorisation of
+        a (6 + 3(M − 1) + 5)-square matrix. A minimiser that satisfies the bounds minimises the
+        bounded QP too (its KKT conditions hold with zero multipliers); one that does not goes
+        to the interior-point solver. Held biases (δb or δb_a fixed at zero) are left out of z.
+        """
+        M, n, ie = self.M, self._n, self._i_e
+        keep = np.concatenate(
+            [np.ones(6 + 3 * (M - 1), bool), np.asarray(free_b, bool), np.full(2, free_a)]
+        )
+        nz = len(keep)
+        tq = np.zeros((M, 6, nz))
+        t0 = np.zeros(n)
+        tq[0, :, :6] = np.eye(6)
+        for k in range(M - 1):
+            tq[k + 1] = a[k] @ tq[k]
+            tq[k + 1, :, 6 + 3 * k : 9 + 3 * k] += b[k]
+            tq[k + 1, :, nz - 5 : nz - 2] += b[k]
+            t0[6 * (k + 1) : 6 * (k + 2)] = a[k] @ t0[6 * k : 6 * (k + 1)] + c[k]
+        t = np.zeros((n, nz))
+        t[: 6 * M] = tq.reshape(6 * M, nz)
+        t[ie:, 6:] = np.eye(nz - 6)
+        t = t[:, keep]
+        ht = hess @ t
+        try:
+            z = -sla.cho_solve(sla.cho_factor(t.T @ ht), t.T @ (hess @ t0 + grad))
+        except sla.LinAlgError:
+            return None
+        x = t @ z + t0
+        vel = x[: 6 * M].reshape(M, 6)[:, 3:] + q_bar[:, 3:]
+        if np.any(vel < self._v_lo) or np.any(vel > self._v_hi) or not np.all(np.isfinite(x)):
+            return None
+        return x
