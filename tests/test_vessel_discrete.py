@@ -3,6 +3,7 @@
 import numpy as np
 from pydrake.autodiffutils import ExtractGradient, InitializeAutoDiff
 
+from usvdrake.systems.vessel import vessel_discrete
 from usvdrake.systems.vessel.vessel_discrete import (
     continuous_jacobians,
     input_jacobian,
@@ -68,6 +69,17 @@ def test_rk4_jacobians_match_autodiff():
         grad = ExtractGradient(z + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4))
         np.testing.assert_allclose(a[i], grad[:, :6], atol=1e-10)
         np.testing.assert_allclose(b[i], grad[:, 6:], atol=1e-10)
+
+
+def test_compiled_float_path_equals_the_numpy_path(monkeypatch):
+    """Float batches take the compiled kernels; other scalar types the numpy functions. Same
+    states to the bit, Jacobians to rounding."""
+    fast = rk4_with_jacobians(XI, Q, TAU, 0.1), rk4(XI, Q, TAU, 0.1)
+    monkeypatch.setattr(vessel_discrete, "_floats", lambda *arrays: False)
+    slow = rk4_with_jacobians(XI, Q, TAU, 0.1), rk4(XI, Q, TAU, 0.1)
+    assert np.array_equal(fast[0][0], slow[0][0]) and np.array_equal(fast[1], slow[1])
+    for i in (1, 2):
+        np.testing.assert_allclose(fast[0][i], slow[0][i], rtol=0, atol=1e-14)
 
 
 def test_rollout_converges_to_the_continuous_plant():
