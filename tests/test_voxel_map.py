@@ -2,6 +2,7 @@
 centroids (scan_registration3d.voxel_downsample) for its contents, scipy's k-d tree for its
 k-nearest-neighbour search."""
 
+import numba
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
@@ -70,6 +71,29 @@ def test_knn_is_the_k_d_tree_answer(voxel, radius):
     np.testing.assert_array_equal(ok, ok_ref)
     assert 30 < ok.sum() < len(q)  # both kinds of answer occur
     np.testing.assert_allclose(table[idx[ok]], pts[i_ref[ok_ref]], atol=1e-12)
+
+
+def test_knn_does_not_depend_on_the_number_of_threads():
+    """The query rows run on numba's threads: one thread and all of them, the same answer and
+    tolerances to the bit."""
+    rng = np.random.default_rng(2)
+    fmap = VoxelMap(0.3, 0.3, search_cell=0.7)
+    for i, c in enumerate(clouds(rng, n=3)):
+        fmap.add(i, c[:40], c)
+    q = rng.uniform(-7, 7, (4000, 3))
+    answers = []
+    for threads in (1, numba.config.NUMBA_NUM_THREADS):
+        idx, ok, tau = np.zeros((len(q), 5), np.int64), np.zeros(len(q), bool), np.zeros(len(q))
+        previous = numba.get_num_threads()
+        numba.set_num_threads(threads)
+        try:
+            fmap.knn_update(False, q, np.arange(0, len(q), 3), 5, 1.0, 0.1, idx, ok, tau)
+        finally:
+            numba.set_num_threads(previous)
+        answers.append((idx, ok, tau))
+    for a, b in zip(*answers, strict=True):
+        assert np.array_equal(a, b)
+    assert answers[0][1].sum() > 100 and not answers[0][1][1::3].any()  # only the rows asked
 
 
 def test_tolerance_certifies_the_answer_for_moved_queries():

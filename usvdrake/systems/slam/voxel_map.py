@@ -21,6 +21,9 @@ KISS-ICP (Vizzo et al., RA-L 2023) the map here is a hash of voxels that is edit
 * a keyframe whose pose estimate changed is shifted in place (:meth:`VoxelMap.move`), and the
   window of keyframes slides (:meth:`VoxelMap.slide`).
 
+The query points of a k-NN call are searched on numba's threads (each writes only its own
+rows, so the answer does not depend on their number; ``NUMBA_NUM_THREADS=1`` for one).
+
 Voxel and cell coordinates are hashed with the spatial hash of Teschner et al., "Optimized
 Spatial Hashing for Collision Detection of Deformable Objects", VMV 2003, into open-addressing
 tables (linear probing, load ≤ ½). Entries of voxels that become empty stay until the tables
@@ -28,7 +31,7 @@ next grow, when the live ones are compacted; all kernels are numba.
 """
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 _P1, _P2, _P3 = 73856093, 19349663, 83492791  # Teschner 2003's primes
 _HALF_RANGE = 1 << 20  # cell / voxel coordinates packed 21 bits each into one int64 key
@@ -118,6 +121,24 @@ def _add_kernel(pts, slots, start, voxel, per_cell, cell, n, vkeys, vvals, ckeys
 
 
 @njit(cache=True)
+def _transform_changed(local, R, t, old, voxel):
+    """(new, changed, n): the points ``local`` (N × 3) at the pose (R, t), which of them fall in
+    another voxel than at ``old``, and how many (:func:`_voxel_changed` fused with the
+    transform: a window of 25 keyframes is shifted at every keyframe)."""
+    n_pts = len(local)
+    new = np.empty((n_pts, 3))
+    changed = np.zeros(n_pts, dtype=np.bool_)
+    n = 0
+    for i in range(n_pts):
+        for r in range(3):
+            new[i, r] = R[r, 0] * local[i, 0] + R[r, 1] * local[i, 1] + R[r, 2] * local[i, 2] + t[r]
+        if voxel > 0 and _voxel_of(old, i, voxel) != _voxel_of(new, i, voxel):
+            changed[i] = True
+            n += 1
+    return new, changed, n
+
+
+@njit(cache=True)
 def _voxel_changed(old, new, voxel):
     """Which points fall in another voxel at their new position (N,) bool."""
     out = np.zeros(len(old), dtype=np.bool_)
@@ -199,7 +220,7 @@ def _search_offsets(side: float, reach: float) -> tuple[np.ndarray, np.ndarray]:
     return np.ascontiguousarray(d[keep]), lb2[keep]
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _knn_kernel(q, rows, k, radius, extra, side, offsets, lb2, ckeys, chead, nxt, cnt, cen, idx,
                 ok, tau):  # fmt: skip
     """For the query rows ``rows`` of q (M × 3): the k nearest live entries within ``radius``
@@ -211,11 +232,12 @@ def _knn_kernel(q, rows, k, radius, extra, side, offsets, lb2, ckeys, chead, nxt
     (:func:`_search_offsets`: by least possible distance lb2), skips a cell farther from q than
     the (k+1)-th distance found, and stops at the first offset that cannot hold a nearer one."""
     K = k + 1
-    bd = np.empty(K)
-    bi = np.empty(K, dtype=np.int64)
     reach_max = radius + extra
     r2 = reach_max * reach_max
-    for m in rows:
+    for row in prange(len(rows)):  # each row writes its own idx, ok, tau: thread-safe
+        m = rows[row]
+        bd = np.empty(K)
+        bi = np.empty(K, dtype=np.int64)
         qx, qy, qz = q[m, 0], q[m, 1], q[m, 2]
         bx, by, bz = int(np.floor(qx / side)), int(np.floor(qy / side)), int(np.floor(qz / side))
         found = 0
@@ -340,20 +362,35 @@ class _Layer:
         """Replace keyframe ``key``'s points by as many others, row for row (the same points at
         a corrected pose): a point that stays in its voxel only shifts the voxel's sum."""
         pts = np.ascontiguousarray(pts, dtype=float).reshape(-1, 3)
-        old, slots = self.slots[key]
+        old = self.slots[key][0]
         if self.voxel <= 0 or len(pts) != len(old):
             self.remove(key)
             self.add(key, pts)
             return
         changed = _voxel_changed(old, pts, self.voxel)
-        moved = np.flatnonzero(changed)
-        if self.n + len(moved) > len(self.cnt):  # might not fit: the general path
+        self._shift(key, pts, changed, int(np.count_nonzero(changed)))
+
+    def move_local(self, key, local: np.ndarray, R: np.ndarray, t: np.ndarray) -> None:
+        """:meth:`move` to the points ``local`` (N × 3, the keyframe's own frame) at the pose
+        (R, t): the transform and the voxel comparison in one compiled pass."""
+        old = self.slots[key][0]
+        if self.voxel <= 0 or len(local) != len(old):
+            self.remove(key)
+            self.add(key, np.ascontiguousarray(local @ R.T + t))
+            return
+        pts, changed, n = _transform_changed(local, R, t, old, self.voxel)
+        self._shift(key, pts, changed, n)
+
+    def _shift(self, key, pts, changed, n_changed: int) -> None:
+        old, slots = self.slots[key]
+        if self.n + n_changed > len(self.cnt):  # might not fit: the general path
             self.remove(key)
             self.add(key, pts)
             return
         slots = slots.copy()
         _move_kernel(old, pts, slots, changed, self.sums, self.cnt, self.cen)
-        if len(moved):
+        if n_changed:
+            moved = np.flatnonzero(changed)
             slots[moved] = self._insert(pts[moved])
         self.slots[key] = (pts, slots)
 
@@ -415,9 +452,13 @@ class VoxelMap:
             T = poses[i]
             if i in self and np.array_equal(self.poses[i], T):
                 continue
-            R, t = T[:3, :3], T[:3, 3]
-            e, p = edge_clouds[i] @ R.T + t, planar_clouds[i] @ R.T + t
-            (self.move if i in self else self.add)(i, e, p, T)
+            R, t = np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3])
+            if i in self:
+                self.edges.move_local(i, _c(edge_clouds[i]), R, t)
+                self.planes.move_local(i, _c(planar_clouds[i]), R, t)
+                self.poses[i] = np.array(T, dtype=float)
+            else:
+                self.add(i, edge_clouds[i] @ R.T + t, planar_clouds[i] @ R.T + t, T)
 
     def remove(self, key) -> None:
         """Drop keyframe ``key``: its points leave their voxels."""
@@ -455,6 +496,10 @@ class VoxelMap:
     def table(self, line: bool) -> np.ndarray:
         """The entry table the indices of :meth:`knn` point into (edges if ``line``)."""
         return (self.edges if line else self.planes).cen
+
+
+def _c(points: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(points, dtype=float).reshape(-1, 3)
 
 
 def voxel_filter(points: np.ndarray, voxel: float) -> np.ndarray:
