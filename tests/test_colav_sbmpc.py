@@ -251,3 +251,22 @@ def test_a_target_briefly_irrelevant_keeps_its_duty():
     assert s.roles[6][1]  # give-way crossing
     s.decide([0.0, 0.0], -NORTH, 0.01, NORTH, U, [_track(6, [-1000.0, 3000.0], [-U, 0.0])])
     assert 6 in s.roles and s.roles[6][1]
+
+
+def test_near_the_route_end_a_released_crossing_target_still_forbids_a_port_turn():
+    # Released for a crossing target from port while on the route's course (7 min to a
+    # collision). Later, near the route's end (stand-on targets no longer hold the course),
+    # the ship is 30° to starboard and the target is past its CPA on that course but not on
+    # the guidance's return course 30° to port: turning back would bring it closer again, so
+    # the no-port-turn limit from the release course holds (Rule 17(c)).
+    tc = 7.0 * 60.0
+    vt = np.array([12.0 * KNOT, 0.0])
+    s = Sbmpc()
+    s.decide([0.0, 0.0], NORTH, U, NORTH, U, [_track(8, [-12.0 * KNOT * tc, U * tc], vt)],
+             path_course=NORTH)  # fmt: skip
+    assert 8 in s.released and s.roles[8][3]  # stand-on crossing, released
+    starboard, back = NORTH - np.radians(30.0), NORTH + np.radians(30.0)
+    d = s.decide([0.0, 0.0], starboard, U, back, U, [_track(8, [-800.0, -1000.0], vt)],
+                 path_course=NORTH, hold_stand_on=False)  # fmt: skip
+    port = np.degrees(back + d.course_offset - NORTH)
+    assert port <= SbmpcParams().port_limit_deg + 1e-9

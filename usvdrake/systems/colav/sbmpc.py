@@ -494,7 +494,13 @@ class Sbmpc:
             # near the route's end a far stand-on target, or one already past on the present
             # course, no longer holds the course; a close one before its CPA still does (a
             # port turn towards it is what Rule 17(c) forbids)
-            if not hold_stand_on and (ranges[i] > p.d_close or tcpa0[i] < 0.0):
+            # (a released crossing one released near the route's course is past only on the
+            # return course too: a port turn back towards it is what would bring its CPA back,
+            # Rule 17(c); released well to starboard, holding that to its CPA would take the
+            # ship far past the route's end, and it returns as before)
+            near_route = duty[2] is not None and duty[2] >= -lim
+            past = tcpa0[i] < 0.0 and not (so_cross and released[i] and near_route)
+            if not hold_stand_on and (ranges[i] > p.d_close or past):
                 continue
             if so_cross and released[i]:
                 duty[2] = rel_now if duty[2] is None else duty[2]
