@@ -4,7 +4,8 @@ where the formulation is described) refills and solves each sample: ``NmheQp`` c
 Q_d, P_b, R_imu, P_a), lays out the decision vector x = [δq_0 … δq_{M−1}, e_0 … e_{M−2}, δb, δb_a]
 and builds once the program's quadratic cost, the dynamics' equality constraint with its fixed
 sparsity pattern, the velocity bounds (15c), the bias boxes and the solver (Clarabel or OSQP);
-it also adds the linearised IMU terms to the cost. ``NmheProblem`` derives from it.
+it also adds the linearised IMU terms to the cost, and solves the QP condensed when no velocity
+bound is active (:meth:`NmheQp._solve_condensed`, the default). ``NmheProblem`` derives from it.
 """
 
 import numpy as np
