@@ -131,7 +131,8 @@ class EnvironmentModel:
         self.area_frontal = hull.beam * freeboard
         self.area_lateral = hull.length * freeboard
         self.waves = make_waves(cfg.waves, seed) if cfg.waves.significant_height > 0 else None
-        self._wave_gain = None  # amplitude ω², made at the first wave force
+        # amplitude ω² of each component: its particle acceleration's amplitude
+        self._wave_gain = None if self.waves is None else self.waves.amplitude * self.waves.omega**2
         self._no_wind = cfg.wind.mean_speed == 0.0 and cfg.wind.gust_std == 0.0
 
     def step_processes(self, gust: float, current_var: float, k: int) -> tuple[float, float]:
@@ -197,8 +198,6 @@ class EnvironmentModel:
 
     def _wave_args(self, q, t):
         h, waves = self.vessel.hydrodynamics, self.waves
-        if self._wave_gain is None:
-            self._wave_gain = waves.amplitude * waves.omega**2
         return (
             float(q[0]),
             float(q[1]),
