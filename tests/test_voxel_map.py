@@ -168,3 +168,29 @@ def test_moving_a_keyframe_equals_dropping_and_adding_it():
         tb, ib, okb = fresh.knn(False, q, 5, 0.8)
         np.testing.assert_array_equal(oka, okb)
         np.testing.assert_allclose(ta[ia[oka]], tb[ib[okb]], atol=1e-9)
+
+
+def test_sliding_the_window_equals_rebuilding_it():
+    """slide(): keyframes that left are dropped, new ones added, and those whose pose changed
+    shifted in the compiled transform-and-compare pass; the map is the one built afresh."""
+    rng = np.random.default_rng(11)
+    local = clouds(rng, n=5, m=800)
+    poses = np.repeat(np.eye(4)[None], 5, axis=0)
+    for i in range(5):
+        poses[i, :3, 3] = [2.0 * i, 0.5 * i, 0.0]
+    fmap = VoxelMap(0.3, 0.3, search_cell=0.7)
+    fmap.slide(range(0, 3), poses, [c[:40] for c in local], local)
+    later = poses.copy()
+    c, s = np.cos(0.02), np.sin(0.02)
+    later[1, :3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
+    later[2, :3, 3] += [0.03, -0.02, 0.01]
+    fmap.slide(range(1, 5), later, [c[:40] for c in local], local)
+    assert sorted(fmap.keys()) == [1, 2, 3, 4]
+    fresh = VoxelMap(0.3, 0.3, search_cell=0.7)
+    for i in range(1, 5):
+        R, t = later[i, :3, :3], later[i, :3, 3]
+        fresh.add(i, local[i][:40] @ R.T + t, local[i] @ R.T + t)
+    for layer in ("planar_points", "edge_points"):
+        a, b = getattr(fmap, layer), getattr(fresh, layer)
+        assert len(a) == len(b)
+        np.testing.assert_allclose(sorted_rows(a), sorted_rows(b), atol=1e-9)
