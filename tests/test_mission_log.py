@@ -23,6 +23,7 @@ from usvdrake.logs.mission_log import (
     read_log_vectors,
     read_mission_log,
 )
+from usvdrake.logs.mission_log.codecs import _encode_imu_json, decode_imu, encode_imu
 from usvdrake.sensors.messages import GpsFix, ImuSample, LaserScan
 
 # the fields Foxglove's own schemas require (foxglove/schemas, jsonschema/*.json)
@@ -62,6 +63,24 @@ def _scan(t=3.5, r=(1.5, np.inf, 2.25, 29.0)):
         ranges=r,
         valid=np.isfinite(r),
     )
+
+
+def test_imu_encoder_writes_what_json_writes():
+    """The written-out IMU encoder gives json.dumps's bytes; non-finite samples take the json
+    path (null)."""
+    rng = np.random.default_rng(4)
+    for t in (0.0, 0.01, 123.456789, 1e5 + 1e-7):
+        w, a, q = rng.normal(size=3), rng.normal(size=3) * 9.81, rng.normal(size=4)
+        sample = ImuSample(time=t, angular_velocity=w, linear_acceleration=a, orientation=q)
+        want = _encode_imu_json(
+            t, list(map(float, w)), list(map(float, a)), list(map(float, q)), "imu"
+        )
+        assert encode_imu(sample) == want
+        back = decode_imu(encode_imu(sample))
+        assert back.time == t and np.array_equal(back.orientation, q)
+    bad = ImuSample(time=1.0, angular_velocity=[np.nan, 0, 0], linear_acceleration=[0, 0, 9.8],
+                    orientation=[0, 0, 0, 1])  # fmt: skip
+    assert json.loads(encode_imu(bad))["angular_velocity"]["x"] is None
 
 
 def test_scan_codec_round_trip():

@@ -295,13 +295,30 @@ def decode_gps(data: bytes) -> GpsFix:
 
 
 def encode_imu(sample: ImuSample, frame_id: str = "imu") -> bytes:
+    t = float(sample.time)
     w = [float(v) for v in sample.angular_velocity]
     a = [float(v) for v in sample.linear_acceleration]
     q = [float(v) for v in sample.orientation]
+    if len(w) == 3 and len(a) == 3 and len(q) == 4 and all(map(math.isfinite, [t, *w, *a, *q])):
+        # written out (the log's most frequent message, 50-100 a second): the bytes json.dumps
+        # gives, floats by their repr as json writes them (tests/test_mission_log.py)
+        ns = _ns(t)
+        return (
+            f'{{"t":{t!r},"timestamp":{{"sec":{ns // 1_000_000_000},"nsec":'
+            f'{ns % 1_000_000_000}}},"frame_id":{json.dumps(frame_id)},'
+            f'"angular_velocity":{{"x":{w[0]!r},"y":{w[1]!r},"z":{w[2]!r}}},'
+            f'"linear_acceleration":{{"x":{a[0]!r},"y":{a[1]!r},"z":{a[2]!r}}},'
+            f'"orientation":{{"x":{q[0]!r},"y":{q[1]!r},"z":{q[2]!r},"w":{q[3]!r}}}}}'
+        ).encode()
+    return _encode_imu_json(t, w, a, q, frame_id)
+
+
+def _encode_imu_json(t: float, w: list, a: list, q: list, frame_id: str) -> bytes:
+    """:func:`encode_imu` through ``json`` (non-finite numbers become null)."""
     return _json(
         {
-            "t": float(sample.time),
-            "timestamp": _stamp(sample.time),
+            "t": t,
+            "timestamp": _stamp(t),
             "frame_id": frame_id,
             "angular_velocity": dict(zip("xyz", w, strict=True)),
             "linear_acceleration": dict(zip("xyz", a, strict=True)),

@@ -11,6 +11,7 @@ bound is active (:meth:`NmheQp._solve_condensed`, the default). ``NmheProblem`` 
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
+from numba import njit
 from pydrake.solvers import ClarabelSolver, MathematicalProgram, OsqpSolver
 
 from usvdrake.systems.estimation.nmhe_model import NmheConfig, imu_interval_model
@@ -198,18 +199,10 @@ class NmheQp:
         keep = np.concatenate(
             [np.ones(6 + 3 * (M - 1), bool), np.asarray(free_b, bool), np.full(2, free_a)]
         )
-        nz = len(keep)
-        tq = np.zeros((M, 6, nz))
-        t0 = np.zeros(n)
-        tq[0, :, :6] = np.eye(6)
-        for k in range(M - 1):
-            tq[k + 1] = a[k] @ tq[k]
-            tq[k + 1, :, 6 + 3 * k : 9 + 3 * k] += b[k]
-            tq[k + 1, :, nz - 5 : nz - 2] += b[k]
-            t0[6 * (k + 1) : 6 * (k + 2)] = a[k] @ t0[6 * k : 6 * (k + 1)] + c[k]
-        t = np.zeros((n, nz))
-        t[: 6 * M] = tq.reshape(6 * M, nz)
-        t[ie:, 6:] = np.eye(nz - 6)
+        t, t0 = _condensing(
+            np.ascontiguousarray(a, dtype=float), np.ascontiguousarray(b, dtype=float),
+            np.ascontiguousarray(c, dtype=float), n, ie,
+        )  # fmt: skip
         t = t[:, keep]
         ht = hess @ t
         try:
@@ -221,3 +214,33 @@ class NmheQp:
         if np.any(vel < self._v_lo) or np.any(vel > self._v_hi) or not np.all(np.isfinite(x)):
             return None
         return x
+
+
+@njit(cache=True)
+def _condensing(a, b, c, n, ie):
+    """(T (n × nz), t (n,)) with x = T z + t: δq_0 = z[:6], δq_{k+1} = A_k δq_k + B_k (e_k + δb)
+    + c_k, and e, δb, δb_a = z[6:] (nz = n − 6(M − 1)); a (M−1, 6, 6), b (M−1, 6, 3), c (M−1, 6)."""
+    m1 = a.shape[0]
+    nz = n - 6 * m1
+    t = np.zeros((n, nz))
+    t0 = np.zeros(n)
+    for i in range(6):
+        t[i, i] = 1.0
+    for k in range(m1):
+        r0, r1 = 6 * k, 6 * (k + 1)
+        for i in range(6):
+            for col in range(nz):
+                acc = 0.0
+                for j in range(6):
+                    acc += a[k, i, j] * t[r0 + j, col]
+                t[r1 + i, col] = acc
+            acc = c[k, i]
+            for j in range(6):
+                acc += a[k, i, j] * t0[r0 + j]
+            t0[r1 + i] = acc
+            for j in range(3):
+                t[r1 + i, 6 + 3 * k + j] += b[k, i, j]
+                t[r1 + i, nz - 5 + j] += b[k, i, j]
+    for i in range(nz - 6):
+        t[ie + i, 6 + i] = 1.0
+    return t, t0

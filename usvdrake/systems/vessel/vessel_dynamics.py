@@ -75,7 +75,7 @@ def vessel_derivatives(xi: Hydrodynamics, q, tau, tau_env, current_world) -> np.
 def vessel_derivatives_float(xi: Hydrodynamics, q, tau, tau_env, current_world) -> np.ndarray:
     """:func:`vessel_derivatives` for one float state, in scalar math (a fifth of the cost; the
     plant calls it at every integrator stage)."""
-    _, _, psi, u, v, r = (float(x) for x in q)
+    _, _, psi, u, v, r = np.asarray(q, dtype=float).tolist()
     c, s = math.cos(psi), math.sin(psi)
     vx, vy = float(current_world[0]), float(current_world[1])
     uc, vc = c * vx + s * vy, -s * vx + c * vy

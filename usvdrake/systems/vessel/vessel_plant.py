@@ -68,16 +68,19 @@ def VesselPlant_(T):
 
         def _qdot(self, context):
             q = context.get_continuous_state_vector().CopyToVector()
+            args = (
+                self._params.hydrodynamics,
+                q,
+                self._tau.Eval(context),
+                self._optional(self._tau_env, context, 3),
+                self._optional(self._current, context, 2),
+            )
+            if T is float:  # scalar math: NaN in, NaN out, never a warning
+                return self._derivatives(*args)
             # Drake's Build() probes feedthrough with NaN inputs: NaN in, NaN out, no warning
             # (a NaN reaching the integrator in a real run stops it with its own error).
             with np.errstate(invalid="ignore"):
-                return self._derivatives(
-                    self._params.hydrodynamics,
-                    q,
-                    self._tau.Eval(context),
-                    self._optional(self._tau_env, context, 3),
-                    self._optional(self._current, context, 2),
-                )
+                return self._derivatives(*args)
 
         def DoCalcTimeDerivatives(self, context, derivatives):
             derivatives.get_mutable_vector().SetFromVector(self._qdot(context))
