@@ -1,5 +1,7 @@
 """Log-odds occupancy grid: a box room, exact insert/remove, Bresenham against the textbook loop."""
 
+import weakref
+
 import numpy as np
 import pytest
 
@@ -220,3 +222,54 @@ def test_occupancy_grid_classes_equal_the_probability_thresholds(occupied_above,
     assert np.array_equal(got, want)
     if 0.12 < free_below <= occupied_above < 0.97:  # thresholds inside the clamp: all three
         assert set(np.unique(want)) == {-1, 0, 100}
+
+
+def test_occupancy_classes_are_updated_only_where_scans_changed_them():
+    """to_occupancy_grid keeps its classes and reclassifies only the windows scans touched
+    since: after insertions, a removal and a shared copy written on either side, every read
+    equals the classes of a grid built afresh from the same scans."""
+    angles = np.linspace(-np.pi, np.pi, 120, endpoint=False)
+
+    def fresh(scans, *thresholds):
+        g = LogOddsGrid((-10.0, -10.0), 0.1, (200, 200))
+        for pose, r in scans:
+            g.insert_scan(pose, np.full(120, r), angles, 8.0)
+        return g.to_occupancy_grid(*thresholds).data
+
+    grid = LogOddsGrid((-10.0, -10.0), 0.1, (200, 200))
+    scans = [((0.0, 0.0, 0.0), 4.0)]
+    grid.insert_scan((0.0, 0.0, 0.0), np.full(120, 4.0), angles, 8.0)
+    assert np.array_equal(grid.to_occupancy_grid().data, fresh(scans))
+    for pose, r in (((3.0, 1.0, 0.2), 2.5), ((-4.0, -2.0, 1.0), 6.0)):
+        grid.insert_scan(pose, np.full(120, r), angles, 8.0)
+        scans.append((pose, r))
+    first = grid.to_occupancy_grid()
+    assert np.array_equal(first.data, fresh(scans))
+    grid.remove_scan((3.0, 1.0, 0.2), np.full(120, 2.5), angles, 8.0)
+    scans.pop(1)
+    copy_ = grid.shared_copy()
+    copy_.insert_scan((5.0, 5.0, 0.0), np.full(120, 1.5), angles, 8.0)
+    assert np.array_equal(grid.to_occupancy_grid().data, fresh(scans))
+    assert np.array_equal(copy_.to_occupancy_grid().data, fresh([*scans, ((5.0, 5.0, 0.0), 1.5)]))
+    assert np.array_equal(grid.to_occupancy_grid().data, fresh(scans))  # the copy's scan unseen
+    assert np.array_equal(first.data, fresh(scans[:1] + [((3.0, 1.0, 0.2), 2.5)] + scans[1:]))
+    # other thresholds: classified anew
+    assert np.array_equal(grid.to_occupancy_grid(0.9, 0.1).data, fresh(scans, 0.9, 0.1))
+
+
+def test_a_copy_whose_sharer_is_gone_writes_in_place():
+    """Copy on write only while another grid still holds the arrays: Drake drops the state a
+    clone replaced, and a read of the clone then needs no copy of the (large) arrays."""
+    angles = np.linspace(-np.pi, np.pi, 90, endpoint=False)
+    grid = LogOddsGrid((-10.0, -10.0), 0.1, (200, 200))
+    grid.insert_scan((0.0, 0.0, 0.0), np.full(90, 4.0), angles, 8.0)
+    assert grid.observed.any()  # applied
+    clone = grid.shared_copy()
+    clone.insert_scan((1.0, 0.0, 0.0), np.full(90, 3.0), angles, 8.0)
+    before = weakref.ref(clone._sum)  # (a plain reference would be a holder itself)
+    del grid  # the state the clone replaced
+    assert clone.observed.sum() > 0 and clone._sum is before()  # written in place, no copy
+    kept = clone.shared_copy()
+    clone.insert_scan((2.0, 0.0, 0.0), np.full(90, 3.0), angles, 8.0)
+    assert clone.observed.sum() > 0
+    assert clone._sum is not kept._sum and kept._sum is before()  # the sharer is alive: copied

@@ -23,6 +23,7 @@ y ∈ origin_y + [row, row+1)·resolution, as :class:`usvdrake.worlds.world.Occu
 """
 
 import copy
+import sys
 
 import numpy as np
 
@@ -30,6 +31,35 @@ from usvdrake.sensors.messages import LaserScan
 from usvdrake.worlds.world import OccupancyGrid
 
 _QUANTUM = 1e-4  # [log-odds] integer unit of the accumulated log-odds
+
+
+def _refs(a: np.ndarray) -> int:
+    return sys.getrefcount(a)
+
+
+class _Probe:
+    pass
+
+
+def _attribute_refs() -> int:
+    """:func:`_refs` of an array held by one object's attribute and nothing else (measured,
+    not assumed: the count depends on how the interpreter passes arguments)."""
+    probe = _Probe()
+    probe.array = np.empty(1)
+    return _refs(probe.array)
+
+
+_ALONE = _attribute_refs()
+
+
+def _held_elsewhere(grid, name: str) -> bool:
+    """Whether anything but ``grid`` holds its array ``name`` (another grid sharing it, a view):
+    then writing needs a copy. Drake drops the state a clone replaced, so the sharer is often gone
+    by the time the grid is read, and the copy (96 MB for a 5 cm lake map) is saved."""
+    return _refs(getattr(grid, name)) > _ALONE
+
+
+MAX_DIRTY = 4096  # changed windows kept for the classes' next update (then: all anew)
 MAX_PENDING = 256  # queued scans applied at the latest then (bounds the queue's memory)
 
 
@@ -128,6 +158,12 @@ class LogOddsGrid:
         self._scratch = _Scratch()
         self._shared = False  # _sum/_count may be another grid's too: copy before writing
         self._pending: list[tuple] = []  # scans inserted (+1) or removed (−1), not yet applied
+        # the last to_occupancy_grid's classes, its thresholds, whether another grid shares the
+        # array, and the windows scans changed since (only those are classified again)
+        self._classes: np.ndarray | None = None
+        self._classes_key: tuple[float, float] | None = None
+        self._classes_shared = False
+        self._dirty: list[tuple[slice, slice]] = []
 
     def shared_copy(self) -> "LogOddsGrid":
         """A copy that shares the arrays until either grid writes (copy on write): Drake clones
@@ -136,7 +172,9 @@ class LogOddsGrid:
         grid cloned at every node copies its arrays once per read, not once per scan."""
         other = copy.copy(self)
         other._pending = list(self._pending)
+        other._dirty = list(self._dirty)
         self._shared = other._shared = True
+        self._classes_shared = other._classes_shared = True
         return other
 
     @property
@@ -192,14 +230,33 @@ class LogOddsGrid:
         Compared in the integer sums (p > p₀ ⟺ clamped l > logit p₀), not through exp() of a
         float copy of the map: a 5 cm lake map is 8 M cells, drawn every second."""
         self._flush()
-        data = np.full(self.shape, OccupancyGrid.UNKNOWN, np.int8)
-        data[self._log_odds_beyond(free_below, below=True)] = OccupancyGrid.FREE
-        data[self._log_odds_beyond(occupied_above, below=False)] = OccupancyGrid.OCCUPIED
-        data[self._count == 0] = OccupancyGrid.UNKNOWN
+        key = (float(occupied_above), float(free_below))
+        if self._classes is None or self._classes_key != key:
+            whole = (slice(0, self.shape[0]), slice(0, self.shape[1]))
+            self._classes = self._classify(whole, occupied_above, free_below)
+            self._classes_key, self._classes_shared = key, False
+        elif self._dirty:  # only the windows scans changed since the last call
+            if self._classes_shared and _held_elsewhere(self, "_classes"):
+                self._classes = self._classes.copy()
+            self._classes_shared = False
+            for window in self._dirty:
+                self._classes[window] = self._classify(window, occupied_above, free_below)
+        self._dirty = []
+        data = self._classes.copy()
         return OccupancyGrid(origin=self.origin, resolution=self.resolution, data=data)
 
-    def _log_odds_beyond(self, p0: float, below: bool) -> np.ndarray | bool:
-        """Cells whose probability is below (or above) p0 [-], as a mask or a constant."""
+    def _classify(self, window, occupied_above: float, free_below: float) -> np.ndarray:
+        """The occupancy classes (:meth:`to_occupancy_grid`) of the cells in ``window``."""
+        s, n = self._sum[window], self._count[window]
+        data = np.full(s.shape, OccupancyGrid.UNKNOWN, np.int8)
+        data[self._log_odds_beyond(free_below, True, s)] = OccupancyGrid.FREE
+        data[self._log_odds_beyond(occupied_above, False, s)] = OccupancyGrid.OCCUPIED
+        data[n == 0] = OccupancyGrid.UNKNOWN
+        return data
+
+    def _log_odds_beyond(self, p0: float, below: bool, sums: np.ndarray) -> np.ndarray | bool:
+        """Cells of ``sums`` whose probability is below (or above) p0 [-], as a mask or a
+        constant."""
         with np.errstate(divide="ignore"):
             l0 = (
                 float(np.log(p0) - np.log1p(-p0))
@@ -207,8 +264,8 @@ class LogOddsGrid:
                 else (np.inf if p0 >= 1.0 else -np.inf)
             )
         if below:  # clamped l < l0
-            return l0 > self.l_max or (l0 > self.l_min and self._sum < l0 / _QUANTUM)
-        return l0 < self.l_min or (l0 < self.l_max and self._sum > l0 / _QUANTUM)
+            return l0 > self.l_max or (l0 > self.l_min and sums < l0 / _QUANTUM)
+        return l0 < self.l_min or (l0 < self.l_max and sums > l0 / _QUANTUM)
 
     def _update(self, pose, ranges, angles, max_range: float, sign: int) -> None:
         rays = self._ray_cells(pose, ranges, angles, max_range)
@@ -247,8 +304,9 @@ class LogOddsGrid:
         """Apply the queued scans (the integer sums commute: order does not matter)."""
         if not self._pending:
             return
-        if self._shared:
-            self._sum, self._count, self._shared = self._sum.copy(), self._count.copy(), False
+        if self._shared and (_held_elsewhere(self, "_sum") or _held_elsewhere(self, "_count")):
+            self._sum, self._count = self._sum.copy(), self._count.copy()
+        self._shared = False
         pending, self._pending = self._pending, []
         for op in pending:
             self._apply(*op)
@@ -289,3 +347,7 @@ class LogOddsGrid:
         self._sum[window] += delta
         np.take(np.array([0, sign, sign], np.int32), mark, out=delta)
         self._count[window] += delta
+        if self._classes is not None:
+            self._dirty.append(window)
+            if len(self._dirty) > MAX_DIRTY:  # a grid no longer read: drop the classes
+                self._classes, self._classes_key, self._dirty = None, None, []
