@@ -14,6 +14,7 @@ from usvdrake.sensors.messages import ImuSample
 from usvdrake.systems.estimation.imu_interval import NAN_MEAN, interval_mean_step, level_imu
 from usvdrake.systems.estimation.nmhe_model import NmheConfig, imu_interval_model
 from usvdrake.systems.estimation.nmhe_problem import NmheProblem
+from usvdrake.systems.slam.lidar_inertial import level_rotation
 from usvdrake.vessel import load_vessel
 
 LEVER = (0.4, -0.2)
@@ -132,6 +133,17 @@ def test_level_imu_takes_out_roll_and_pitch():
     sample = ImuSample(1.0, tilt.T @ w_level, tilt.T @ f_level, np.array(q))
     assert np.allclose(level_imu(sample), [0.3, -0.2, 0.15], atol=1e-12)
     assert ImuSample().is_empty() and not sample.is_empty()
+
+
+def test_level_imu_is_the_slams_level_rotation():
+    """The scalar level_imu applies lidar_inertial.level_rotation(I, q), unnormalised q too."""
+    rng = np.random.default_rng(8)
+    for _ in range(200):
+        q, f, w = rng.normal(size=4), rng.normal(size=3) * 5.0, rng.normal(size=3)
+        tilt = level_rotation(np.eye(3), q)
+        want = [(tilt @ f)[0], (tilt @ f)[1], (tilt @ w)[2]]
+        got = level_imu(ImuSample(0.0, w, f, q))
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
 
 
 @cache

@@ -6,12 +6,13 @@ the quantities :func:`usvdrake.systems.estimation.nmhe_model.imu_interval_model`
 from the states at both ends. Averaging also divides the white noise by √(samples).
 """
 
+import math
+
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from usvdrake.sensors.messages import ImuSample
-from usvdrake.systems.slam.lidar_inertial import level_rotation
 
 # discrete state: [∫f_x, ∫f_y, ∫ω_z, covered time, last t, last f_x, f_y, ω_z,
 #                  mean f_x, f_y, ω_z, interval end]
@@ -22,11 +23,29 @@ NAN_MEAN = [np.nan, np.nan, np.nan, np.nan]
 def level_imu(sample: ImuSample) -> np.ndarray:
     """[f_x, f_y, ω_z] of one sample in the level frame that shares the body's heading
     [m/s², m/s², rad/s]: the AHRS's roll and pitch taken out (on a rolling boat a 1° tilt
-    would leak 0.17 m/s² of gravity into f_x, f_y); an upright sample is unchanged."""
-    tilt = level_rotation(np.eye(3), sample.orientation)
-    f = tilt @ np.asarray(sample.linear_acceleration, float)
-    w = tilt @ np.asarray(sample.angular_velocity, float)
-    return np.array([f[0], f[1], w[2]])
+    would leak 0.17 m/s² of gravity into f_x, f_y); an upright sample is unchanged.
+
+    That is ``level_rotation(I, q)`` applied to the readings, written in scalars (one call
+    per IMU sample, 100 a second): the AHRS rotation R_a, its yaw ψ_a, and Rz(ψ_a)ᵀ R_a."""
+    x, y, z, w = np.asarray(sample.orientation, dtype=float).tolist()
+    n = math.sqrt(x * x + y * y + z * z + w * w)
+    x, y, z, w = x / n, y / n, z / n, w / n
+    r0 = (1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w))
+    r1 = (2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w))
+    r2 = (2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y))
+    yaw = math.atan2(r1[0], r0[0])
+    c, s = math.cos(yaw), math.sin(yaw)
+    t0 = [c * r0[j] + s * r1[j] for j in range(3)]  # rows of Rz(ψ_a)ᵀ R_a
+    t1 = [-s * r0[j] + c * r1[j] for j in range(3)]
+    f = np.asarray(sample.linear_acceleration, dtype=float).tolist()
+    g = np.asarray(sample.angular_velocity, dtype=float).tolist()
+    return np.array(
+        [
+            t0[0] * f[0] + t0[1] * f[1] + t0[2] * f[2],
+            t1[0] * f[0] + t1[1] * f[1] + t1[2] * f[2],
+            r2[0] * g[0] + r2[1] * g[1] + r2[2] * g[2],
+        ]
+    )
 
 
 class ImuIntervalMean(LeafSystem):
