@@ -48,16 +48,21 @@ class Client(threading.Thread):
                     for ch in data["channels"]:
                         self.channels[ch["topic"]] = ch
                         if ch["topic"] == self.topic:
-                            sub = {
-                                "op": "subscribe",
-                                "subscriptions": [{"id": 1, "channelId": ch["id"]}],
-                            }
-                            await ws.write_message(json.dumps(sub))
+                            await self._subscribe(ws, ch["id"])
+                elif data.get("op") == "status" and "Unknown channel" in data.get("message", ""):
+                    # the SDK server can advertise a channel a moment before it accepts a
+                    # subscription to it (seen with the suite's other worker busy): ask again
+                    await asyncio.sleep(0.05)
+                    await self._subscribe(ws, self.channels[self.topic]["id"])
             elif msg[0] == 1:  # messageData: opcode, subscription id, log time, payload
                 (sub_id,) = struct.unpack_from("<I", msg, 1)
                 assert sub_id == 1
                 self.payloads.append(bytes(msg[13:]))
         ws.close()
+
+    async def _subscribe(self, ws, channel_id: int) -> None:
+        sub = {"op": "subscribe", "subscriptions": [{"id": 1, "channelId": channel_id}]}
+        await ws.write_message(json.dumps(sub))
 
 
 @pytest.mark.slow
@@ -67,9 +72,7 @@ def test_a_foxglove_client_sees_the_logs_channels_and_receives_the_pose_live(tmp
     client.start()
     assert client.connected.wait(10)
     try:
-        # 12 s of wall time: a client thread starved on a busy machine still subscribes in time
-        # for 20 poses (with 4 s it once received none while other work ran beside the suite)
-        scenario = with_overrides(load_scenario("canal_demo"), duration=60.0)
+        scenario = with_overrides(load_scenario("canal_demo"), duration=20.0)
         run_mission(scenario, tmp_path, record=False, realtime_rate=5.0, live=live)
     finally:
         client.stop.set()
@@ -80,7 +83,7 @@ def test_a_foxglove_client_sees_the_logs_channels_and_receives_the_pose_live(tmp
     for topic, ch in client.channels.items():  # the recorded schemas, streamed as they are
         assert ch["schemaName"] == logged[topic]["schema"] and ch["encoding"] == "json"
     assert client.channels["/vessel_pose"]["schemaName"] == "foxglove.PoseInFrame"
-    assert len(client.payloads) > 20  # 2 s of the 12 s of wall time at the log's 10 Hz pose
+    assert len(client.payloads) > 20  # 4 s of wall time at the log's 10 Hz pose
     pose = json.loads(client.payloads[-1])
     assert pose["frame_id"] == "world" and "position" in pose["pose"]
     assert live.messages > len(client.payloads)
