@@ -123,8 +123,8 @@ def _add_kernel(pts, slots, start, voxel, per_cell, cell, n, vkeys, vvals, ckeys
 @njit(cache=True)
 def _transform_changed(local, R, t, old, voxel):
     """(new, changed, n): the points ``local`` (N × 3) at the pose (R, t), which of them fall in
-    another voxel than at ``old``, and how many (:func:`_voxel_changed` fused with the
-    transform: a window of 25 keyframes is shifted at every keyframe)."""
+    another voxel than at ``old``, and how many (the transform and the comparison in one pass:
+    a window of 25 keyframes is shifted at every keyframe)."""
     n_pts = len(local)
     new = np.empty((n_pts, 3))
     changed = np.zeros(n_pts, dtype=np.bool_)
@@ -136,15 +136,6 @@ def _transform_changed(local, R, t, old, voxel):
             changed[i] = True
             n += 1
     return new, changed, n
-
-
-@njit(cache=True)
-def _voxel_changed(old, new, voxel):
-    """Which points fall in another voxel at their new position (N,) bool."""
-    out = np.zeros(len(old), dtype=np.bool_)
-    for i in range(len(old)):
-        out[i] = _voxel_of(old, i, voxel) != _voxel_of(new, i, voxel)
-    return out
 
 
 @njit(cache=True)
@@ -362,13 +353,7 @@ class _Layer:
         """Replace keyframe ``key``'s points by as many others, row for row (the same points at
         a corrected pose): a point that stays in its voxel only shifts the voxel's sum."""
         pts = np.ascontiguousarray(pts, dtype=float).reshape(-1, 3)
-        old = self.slots[key][0]
-        if self.voxel <= 0 or len(pts) != len(old):
-            self.remove(key)
-            self.add(key, pts)
-            return
-        changed = _voxel_changed(old, pts, self.voxel)
-        self._shift(key, pts, changed, int(np.count_nonzero(changed)))
+        self.move_local(key, pts, np.eye(3), np.zeros(3))  # the identity moves no bit
 
     def move_local(self, key, local: np.ndarray, R: np.ndarray, t: np.ndarray) -> None:
         """:meth:`move` to the points ``local`` (N × 3, the keyframe's own frame) at the pose

@@ -134,6 +134,27 @@ class EnvironmentModel:
         # amplitude ω² of each component: its particle acceleration's amplitude
         self._wave_gain = None if self.waves is None else self.waves.amplitude * self.waves.omega**2
         self._no_wind = cfg.wind.mean_speed == 0.0 and cfg.wind.gust_std == 0.0
+        # the kernels' constant arguments, made once (the plant asks at every integrator stage)
+        w, b = cfg.wind, math.radians(cfg.wind.direction_deg)
+        k = 0.5 * w.air_density
+        self._wind_direction = (math.cos(b), math.sin(b))
+        self._wind_gains = (
+            k * w.cx * self.area_frontal,
+            k * w.cy * self.area_lateral,
+            k * w.cn * self.area_lateral * hull.length,
+        )
+        if self.waves is not None:
+            h = vessel.hydrodynamics
+            self._wave_constants = (
+                0.25 * hull.length,
+                self.waves.direction,
+                self.waves.wavenumber,
+                self.waves.phase,
+                self.waves.omega,
+                self._wave_gain,
+                h.m11,
+                h.m22,
+            )
 
     def step_processes(self, gust: float, current_var: float, k: int) -> tuple[float, float]:
         """Advance (gust, current variation) by one update period, step index k."""
@@ -181,37 +202,12 @@ class EnvironmentModel:
         return np.array((w[0] + f[0], w[1] + f[1], w[2] + f[2]))
 
     def _wind_args(self, q, gust):
-        w = self.cfg.wind
-        speed = w.mean_speed + gust
-        b = math.radians(w.direction_deg)
-        k = 0.5 * w.air_density
-        return (
-            float(q[2]),
-            float(q[3]),
-            float(q[4]),
-            speed * math.cos(b),
-            speed * math.sin(b),
-            k * w.cx * self.area_frontal,
-            k * w.cy * self.area_lateral,
-            k * w.cn * self.area_lateral * self.vessel.hull.length,
-        )
+        speed = self.cfg.wind.mean_speed + gust
+        c, s = self._wind_direction
+        return (float(q[2]), float(q[3]), float(q[4]), speed * c, speed * s, *self._wind_gains)
 
     def _wave_args(self, q, t):
-        h, waves = self.vessel.hydrodynamics, self.waves
-        return (
-            float(q[0]),
-            float(q[1]),
-            float(q[2]),
-            float(t),
-            0.25 * self.vessel.hull.length,
-            waves.direction,
-            waves.wavenumber,
-            waves.phase,
-            waves.omega,
-            self._wave_gain,
-            h.m11,
-            h.m22,
-        )
+        return (float(q[0]), float(q[1]), float(q[2]), float(t), *self._wave_constants)
 
 
 @njit(cache=True)
