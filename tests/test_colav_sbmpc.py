@@ -270,3 +270,18 @@ def test_near_the_route_end_a_released_crossing_target_still_forbids_a_port_turn
                  path_course=NORTH, hold_stand_on=False)  # fmt: skip
     port = np.degrees(back + d.course_offset - NORTH)
     assert port <= SbmpcParams().port_limit_deg + 1e-9
+
+
+def test_the_prediction_ends_where_the_route_ends():
+    """A target that will cross the own ship's course line 1.5 km ahead, 300 s from now: on
+    a voyage that goes on, holding course meets it there and the SB-MPC turns away; with the
+    route's end 600 m ahead (arrival radius 150 m) the ship is in before the target comes
+    within the safety distance, so it holds course and speed."""
+    target = dict(positions=[[1500.0, -1500.0]], velocities=[[0.0, 5.0]])
+    on = Sbmpc(SbmpcParams()).decide([0, 0], 0.0, 5.0, 0.0, 5.0, **target)
+    assert on.course_offset < 0.0 and on.min_distance < SbmpcParams().d_safe * 1.1
+    ends = Sbmpc(SbmpcParams()).decide(
+        [0, 0], 0.0, 5.0, 0.0, 5.0, **target, destination=(600.0, 0.0), arrival_radius=150.0
+    )
+    assert (ends.course_offset, ends.speed_factor) == (0.0, 1.0)
+    assert ends.min_distance > SbmpcParams().d_safe  # until the arrival

@@ -235,6 +235,8 @@ def build_encounter_diagram(
             cfg.colav_period_s,
             None if cfg.max_return_deg is None else np.radians(cfg.max_return_deg),
             None if cfg.end_release_lookaheads is None else cfg.end_release_lookaheads * lookahead,
+            destination=route.xy[-1],
+            arrival_radius=cfg.arrival_radius_m,
         ),
     )
     b.Connect(targets.GetOutputPort("target_states"), ais.GetInputPort("target_states"))

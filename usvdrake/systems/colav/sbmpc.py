@@ -37,7 +37,9 @@ to port less than the deviation cost f of keeping a starboard offset, so the own
 its course once the hazard is gone. (6) The hazard adds k_mean × the time-average of C·R over the
 horizon: when the own ship is already inside a safety zone, the maximum over time is reached
 at the first step for every behaviour alike, and the average then prefers the behaviour that
-leaves the zone soonest.
+leaves the zone soonest. (7) Given the route's end (``destination``), a behaviour's prediction
+ends where it arrives there: a target that passes the end after the own ship is in is no hazard
+(without it, a ship whose route ends beside a target's track was held off its end).
 
 Use: pass the guidance's course (e.g. line-of-sight, which steers back to the route) as the
 nominal course and let the autopilot steer nominal + offset at nominal speed × factor at all
@@ -278,6 +280,8 @@ def hazard(
     last=(0.0, 1.0),
     roles=None,
     released=None,
+    destination=None,
+    arrival_radius: float = 0.0,
 ):
     """H_k of every behaviour and the predicted minimum distance of each: ((S,), (S,)).
 
@@ -346,6 +350,16 @@ def hazard(
         close & crossed_ahead & ((sp > params.min_target_speed) & (give_way | so_cross & ~holding))
     )
     inst = risk + params.kappa * mu + params.lam * tau
+    if destination is not None:
+        # the voyage ends where a behaviour's prediction reaches the route's end: what the
+        # targets do after that is no hazard to it
+        there = np.hypot(*(own_p - np.asarray(destination, float)).transpose(2, 0, 1))
+        done = np.cumsum(there <= arrival_radius, axis=1) > 0
+        done[:, 1:] &= done[:, :-1]  # from the step after the first arrival
+        done[:, 0] = False
+        inst = np.where(done[:, :, None], 0.0, inst)
+        risk = np.where(done[:, :, None], 0.0, risk)
+        dist = np.where(done[:, :, None], np.inf, dist)
     h = inst.reshape(chi_k.size, -1).max(axis=1)
     # Already inside a safety zone, every behaviour's maximum sits at t ≈ 0 and is the same for
     # all; the time-average of the risk then tells which behaviour leaves the zone soonest.
@@ -370,7 +384,8 @@ class Sbmpc:
 
     def decide(
         self, position, course, speed, course_ref, speed_ref, tracks=None, *, positions=None,
-        velocities=None, ids=None, path_course=None, hold_stand_on=True,
+        velocities=None, ids=None, path_course=None, hold_stand_on=True, destination=None,
+        arrival_radius=0.0,
     ) -> SbmpcDecision:  # fmt: skip
         """Choose (course offset, speed factor) from the own state (position [m], course [rad],
         speed [m/s]), the nominal course and speed from guidance, and the targets: `tracks`
@@ -378,7 +393,9 @@ class Sbmpc:
         (with `ids` to remember roles; without ids roles are classified afresh each call).
         `path_course`: the route's course, which the no-port-turn rule is measured from
         (default the nominal course). `hold_stand_on` False: no stand-on duty bounds the course
-        (``hold_until_clear``; e.g. near the route's end, which the ship must still make)."""
+        (``hold_until_clear``; e.g. near the route's end, which the ship must still make).
+        `destination`: the route's end; each behaviour's prediction stops counting hazards
+        from the step after it comes within `arrival_radius` [m] of it."""
         if tracks is not None:
             positions = [tr.position for tr in tracks]
             velocities = [tr.velocity for tr in tracks]
@@ -421,7 +438,7 @@ class Sbmpc:
             return SbmpcDecision(0.0, 1.0, i0, 0.0, np.zeros(self._chi.size), np.inf, False)
         costs, dmin = hazard(
             self.params, pos0, course, speed, course_ref, speed_ref, tp, tv, self.last, roles,
-            released,
+            released, destination, arrival_radius,
         )  # fmt: skip
         if roles is not None and self.params.hold_until_clear:
             ref = course_ref if path_course is None else path_course

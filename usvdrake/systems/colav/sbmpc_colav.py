@@ -42,7 +42,8 @@ class SbmpcColav(LeafSystem):
     (``distance_to_end``, optional) no stand-on duty bounds the course (``Sbmpc.decide``'s
     ``hold_stand_on``): a stand-on ship held off its route there would miss its end. The
     ``Sbmpc`` (last choice, remembered COLREG roles) is abstract state; the last decision is
-    discrete state.
+    discrete state. ``destination`` (the route's end [x, y]) and ``arrival_radius`` [m]: the
+    predictions end where they arrive (``Sbmpc.decide``).
     """
 
     def __init__(
@@ -51,6 +52,8 @@ class SbmpcColav(LeafSystem):
         period: float = 5.0,
         max_return: float | None = None,
         end_release: float | None = None,
+        destination=None,
+        arrival_radius: float = 0.0,
     ):
         super().__init__()
         if not period > 0.0:
@@ -61,6 +64,8 @@ class SbmpcColav(LeafSystem):
         self._max_return = max_return
         self._to_end = self.DeclareVectorInputPort("distance_to_end", 1)
         self._end_release = end_release
+        self._destination = None if destination is None else np.asarray(destination, float)
+        self._arrival = float(arrival_radius)
         self._tracks = self.DeclareAbstractInputPort("tracks", AbstractValue.Make([]))
         self._sbmpc = self.DeclareAbstractState(AbstractValue.Make(Sbmpc(params)))
         initial = np.array([0.0, 1.0, 0.0, np.inf, 0.0, 0.0, 0.0, 0.0])
@@ -93,7 +98,8 @@ class SbmpcColav(LeafSystem):
         d = sbmpc.decide(
             [x, y], course, sog, float(course_ref),
             float(speed_ref), self._tracks.Eval(context),
-            path_course=path, hold_stand_on=hold,
+            path_course=path, hold_stand_on=hold, destination=self._destination,
+            arrival_radius=self._arrival,
         )  # fmt: skip
         ms = 1e3 * (time.perf_counter() - t0)
         count = context.get_discrete_state(self._diag).GetAtIndex(6) + 1.0
