@@ -884,6 +884,15 @@ def test_the_scans_calibrate_the_odometry_where_they_measure_the_motion():
     assert len(late) == 5
     for c in late:  # after calibration the odometry's step agrees with the scans' own
         assert np.hypot(*(c.z[:2] - between(est[c.i], est[c.j])[:2])) < 0.02
+    # the first span was tied before the scans had calibrated anything (scale 1, 10 % long);
+    # an optimisation takes it in the calibration of the moment, and it agrees as well
+    first = next(c for c in slam.constraints if c.kind == "odometry")
+    np.testing.assert_allclose(first.z, first.raw)
+    z, cov = slam._measurement(first)
+    np.testing.assert_allclose(z, first.raw * [k_d, k_d, k_r])
+    assert np.hypot(*(first.z[:2] - between(est[first.i], est[first.j])[:2])) > 0.05
+    assert np.hypot(*(z[:2] - between(est[first.i], est[first.j])[:2])) < 0.02
+    assert np.all(np.diag(cov) > 0)
     off = GraphSlam(replace(cfg, odometry_calibrate=False))
     assert off.odometry_scale == (1.0, 1.0)
 

@@ -4,6 +4,7 @@ import bz2
 import gzip
 import json
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -134,14 +135,20 @@ def test_slam2d_uses_the_logs_wheel_odometry_by_default(tmp_path):
     metrics = json.loads((odo / "metrics.json").read_text())
     assert metrics["odometry"] is True and len(metrics["odometry_scale"]) == 2
     assert all(0.5 < k < 2.0 for k in metrics["odometry_scale"])
-    assert metrics["slam_nodes"] == without["slam_nodes"]  # the scans alone make the nodes
-    assert metrics["slam_constraints"] > without["slam_constraints"]
-    # every odometry constraint was either added or gated out (odometry_gate), none counted twice
-    added = metrics["slam_constraints"] - without["slam_constraints"]
-    assert metrics["odometry_constraints"] == added > 0 and without["odometry_constraints"] == 0
+    # the odometry only tying nodes (not seeding the matches too, as LOG_CONFIG has it): the
+    # scans alone make the nodes, and every odometry constraint was either added or gated out
+    # (odometry_gate), none counted twice
+    tied = run_slam2d(
+        LOG, tmp_path / "tied", progress=False, config=replace(LOG_CONFIG, odometry_seed=False)
+    )
+    assert tied["odometry"] is True and tied["slam_nodes"] == without["slam_nodes"]
+    added = tied["slam_constraints"] - without["slam_constraints"]
+    assert tied["odometry_constraints"] == added > 0 and without["odometry_constraints"] == 0
     assert without["odometry_rejected"] == 0  # scan-only: nothing to gate
+    assert metrics["odometry_constraints"] > 0
     assert metrics["motion_prior"] == (
-        f"wheel odometry ({added} constraints, {metrics['odometry_rejected']} gated out)"
+        f"wheel odometry ({metrics['odometry_constraints']} constraints, "
+        f"{metrics['odometry_rejected']} gated out)"
     )
     again = json.loads((old / "metrics.json").read_text())
     assert again["motion_prior"] == metrics["motion_prior"]

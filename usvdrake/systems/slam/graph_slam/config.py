@@ -106,11 +106,15 @@ class GraphSlamConfig:
     # 16.27: p = 0.001). Raw Freiburg 079's logged odometry has gross errors while the robot
     # manoeuvres (a 2.2 m forward step where the scans and the corrected poses back up 2.3 m):
     # robustified only, they took its ATE from 0.09 to 1.3 m over the first 1800 scans.
-    # Along a corridor the chain's covariance is long, the gate wide: the odometry stays
+    # Along a corridor the chain's covariance is long, the gate wide: the odometry stays (if
+    # the tracking did not settle on a wrong step there: odometry_seed)
     odometry_gate: float = 16.27
     # odometry also seeds a second tracking match beside the constant velocity's, kept unless
-    # that one scores search_prior_margin higher. Off: on raw MIT-CSAIL, whose logged odometry
-    # lags and jitters by up to 0.3 rad a scan, it took the ATE from 0.21 to 0.29 m
+    # that one scores search_prior_margin higher. Along a corridor the constant velocity feeds
+    # on itself: once a step came out short, the next match starts from a short step and the
+    # flat corridor keeps it there (raw ACES's first corridor: 2.1 m driven, 0.2 m tracked,
+    # the odometry's span then gated out). Off by default (streams without wheels);
+    # LOG_CONFIG sets it (usvdrake.run.slam2d)
     odometry_seed: bool = False
     # [m, rad] > 0: a scan with an odometry step is searched within ± these of the
     # odometry's guess instead of search_*_window about rest or the constant velocity (the

@@ -58,3 +58,6 @@ class Constraint:
     cov: np.ndarray  # 3 × 3
     robust: bool
     kind: str  # "consecutive", "odometry", "link", "loop"
+    # an odometry constraint's step as the wheels measured it, before the calibration: each
+    # optimisation scales it by the calibration of the moment (GraphSlam.odometry_scale)
+    raw: np.ndarray | None = None

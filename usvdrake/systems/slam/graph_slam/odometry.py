@@ -45,6 +45,15 @@ class OdometryMixin:
         k_d, k_r = self.odometry_scale
         return step * (k_d, k_d, k_r)
 
+    def _measurement(self, c: Constraint) -> tuple[np.ndarray, np.ndarray]:
+        """(z, cov) of a constraint for an optimisation: an odometry constraint's step in the
+        calibration of the moment, so that the spans tied before the scans had calibrated the
+        odometry (a raw log's first metres, at scale 1) do not keep the wheels' error."""
+        if c.raw is None:
+            return c.z, c.cov
+        z = self._calibrated(c.raw)
+        return z, odometry_covariance(z, self.cfg.odometry_sigma)
+
     def _calibrate_odometry(self, prev: int, k: int, rel: np.ndarray, cov: np.ndarray) -> None:
         """Add the node step ``rel`` (covariance ``cov``) to the odometry's calibration sums
         where the scans measured it: translation when its σ along the motion is within
@@ -84,12 +93,12 @@ class OdometryMixin:
         chain = compose_covariance(*(self._odometry_chain or zero), rel, cov)
         step = between(there, here)
         if np.hypot(step[0], step[1]) >= self.cfg.odometry_span or abs(step[2]) >= 1.0:
-            step = self._calibrated(step)
+            raw, step = step, self._calibrated(step)
             step_cov = odometry_covariance(step, self.cfg.odometry_sigma)
             e = step - chain[0]
             e[2] = np.angle(np.exp(1j * e[2]))
             if e @ np.linalg.solve(chain[1] + step_cov, e) <= self.cfg.odometry_gate:
-                self.constraints.append(Constraint(start, k, step, step_cov, True, "odometry"))
+                self.constraints.append(Constraint(start, k, step, step_cov, True, "odometry", raw))
             else:
                 self.stats["odometry_rejected"] += 1
             start, chain = k, None

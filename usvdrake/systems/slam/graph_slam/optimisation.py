@@ -102,7 +102,7 @@ class OptimisationMixin:
         # a window's constraints are the list's tail (Node.first_constraint): not a scan of
         # the whole list per node, which on Intel's raw log (10 700 nodes) cost minutes
         start = 0 if full else self.nodes[min(active)].first_constraint
-        rows, covs, loop_ids, used = [], [], [], set()
+        rows, ij, robust, covs, loop_ids, used = [], [], [], [], [], set()
         for n_c in range(start, len(self.constraints)):
             c = self.constraints[n_c]
             if not (c.i in active or c.j in active):
@@ -110,8 +110,11 @@ class OptimisationMixin:
             candidate = c.kind == "loop" and gnc
             if c.kind == "loop" and not gnc and n_c in self._rejected:
                 continue
-            rows.append(c)
-            covs.append(c.cov + loop_floor if candidate else c.cov)
+            z, cov = self._measurement(c)
+            rows.append(z)
+            ij.append((c.i, c.j))
+            robust.append(c.robust)
+            covs.append(cov + loop_floor if candidate else cov)
             loop_ids.append(n_c if candidate else -1)
             used.update((c.i, c.j))
         anchor = min(active)
@@ -120,11 +123,11 @@ class OptimisationMixin:
             keys=np.array(keys, int),
             poses=np.array([self.nodes[k].pose for k in keys], float).reshape(-1, 3),
             fixed=np.array([k not in active or k == anchor for k in keys], bool),
-            i=np.array([c.i for c in rows], int),
-            j=np.array([c.j for c in rows], int),
-            z=np.array([c.z for c in rows], float).reshape(-1, 3),
+            i=np.array([a for a, _ in ij], int),
+            j=np.array([b for _, b in ij], int),
+            z=np.array(rows, float).reshape(-1, 3),
             cov=np.array(covs, float).reshape(-1, 3, 3),
-            robust=np.array([c.robust and not gnc for c in rows], bool),
+            robust=np.array([r and not gnc for r in robust], bool),
             loop_id=np.array(loop_ids, int),
             alpha=self.cfg.alpha,
             c=self.cfg.c,
