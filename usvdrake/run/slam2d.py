@@ -115,8 +115,9 @@ LOG_CONFIG = GraphSlamConfig(
     landscape_temperature=2.0,
     # with wheel odometry, its step seeds a second tracking match (GraphSlamConfig.odometry_seed):
     # raw ACES's first corridor had tracked 0.2 m of the 2.1 m driven, and the odometry's span
-    # over it was gated out. Raw ACES 0.303 -> 0.198 m, MIT-CSAIL 0.156 -> 0.158 m, Freiburg 079
-    # 0.104 -> 0.106 m (docs/experiments/slam2d-odometry.md)
+    # over it was gated out. With the spans' recalibration (GraphSlam._measurement): raw Intel
+    # 0.106 -> 0.0935 m, ACES 0.303 -> 0.198 m, MIT-CSAIL 0.156 -> 0.158 m, Freiburg 079 0.104 ->
+    # 0.106 m (docs/experiments/slam2d-odometry.md)
     odometry_seed=True,
     # no relinking of the final estimate (GraphSlam.relink): within 10 m it took MIT-CSAIL from
     # 0.135 to 0.0998 m (67 s more) but Intel from 0.095 to 0.109 m (30 links per node); it is

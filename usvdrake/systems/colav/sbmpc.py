@@ -354,9 +354,9 @@ def hazard(
         # the voyage ends where a behaviour's prediction reaches the route's end: what the
         # targets do after that is no hazard to it
         there = np.hypot(*(own_p - np.asarray(destination, float)).transpose(2, 0, 1))
-        done = np.cumsum(there <= arrival_radius, axis=1) > 0
-        done[:, 1:] &= done[:, :-1]  # from the step after the first arrival
-        done[:, 0] = False
+        reached = np.cumsum(there <= arrival_radius, axis=1) > 0
+        done = np.zeros_like(reached)
+        done[:, 1:] = reached[:, :-1]  # from the step after the first arrival
         inst = np.where(done[:, :, None], 0.0, inst)
         risk = np.where(done[:, :, None], 0.0, risk)
         dist = np.where(done[:, :, None], np.inf, dist)

@@ -113,8 +113,8 @@ class GraphSlamConfig:
     # that one scores search_prior_margin higher. Along a corridor the constant velocity feeds
     # on itself: once a step came out short, the next match starts from a short step and the
     # flat corridor keeps it there (raw ACES's first corridor: 2.1 m driven, 0.2 m tracked,
-    # the odometry's span then gated out). Off by default (streams without wheels);
-    # LOG_CONFIG sets it (usvdrake.run.slam2d)
+    # the odometry's span then gated out). Measured on the CARMEN logs only, so LOG_CONFIG
+    # sets it (usvdrake.run.slam2d) and the other configurations keep it off
     odometry_seed: bool = False
     # [m, rad] > 0: a scan with an odometry step is searched within ± these of the
     # odometry's guess instead of search_*_window about rest or the constant velocity (the

@@ -59,5 +59,6 @@ class Constraint:
     robust: bool
     kind: str  # "consecutive", "odometry", "link", "loop"
     # an odometry constraint's step as the wheels measured it, before the calibration: each
-    # optimisation scales it by the calibration of the moment (GraphSlam.odometry_scale)
+    # optimisation scales it by the calibration of the moment (GraphSlam._measurement); its z
+    # and cov are as tied (and gated), in the calibration of that moment
     raw: np.ndarray | None = None
