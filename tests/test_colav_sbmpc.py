@@ -285,3 +285,65 @@ def test_the_prediction_ends_where_the_route_ends():
     )
     assert (ends.course_offset, ends.speed_factor) == (0.0, 1.0)
     assert ends.min_distance > SbmpcParams().d_safe  # until the arrival
+
+
+def test_a_behaviour_that_keeps_the_required_cpa_wins_over_one_that_breaks_it():
+    """DNV situation 19 at 305 s (rounded): a ship overtaking us from astern at 7.8 m/s, its
+    stand-on duty released, and a slower ship ahead; the guidance pulls back to port. The
+    relative-speed weight of C·R makes a pass at < 926 m from the overtaking ship cheaper than
+    a wider starboard turn; the required CPA ranks first (``keep_required_cpa``)."""
+    geometry = dict(
+        position=[618.0, 1385.0], course=1.3208, speed=5.128, course_ref=2.1242, speed_ref=5.144,
+        target_positions=[[692.0, 3501.0], [116.0, 246.0]],
+        target_velocities=[[-0.80, 3.00], [-0.05, 7.77]],
+        last=(np.radians(-45.0), 1.0),
+        roles=[[False, False, False, False], [False, False, True, False]],
+        released=[False, True],
+    )  # fmt: skip
+    cpa = SbmpcParams().cpa_required
+    weighted, d_weighted = hazard(SbmpcParams(keep_required_cpa=False), **geometry)
+    assert d_weighted[np.argmin(weighted)] < cpa  # the risk alone breaks the requirement
+    guarded, d_guarded = hazard(SbmpcParams(), **geometry)
+    assert d_guarded[np.argmin(guarded)] >= cpa
+    assert np.any(d_weighted >= cpa)  # a behaviour that keeps it existed
+
+
+def test_no_behaviour_keeps_the_required_cpa_the_guard_changes_nothing():
+    # already 850 m abeam of a ship overtaking us: every behaviour passes nearer than 926 m
+    geometry = dict(
+        position=[0.0, 0.0], course=NORTH, speed=U, course_ref=NORTH, speed_ref=U,
+        target_positions=[[-850.0, -300.0]], target_velocities=[[0.0, 6.0]],
+    )  # fmt: skip
+    off, d_off = hazard(SbmpcParams(keep_required_cpa=False), **geometry)
+    on, _ = hazard(SbmpcParams(), **geometry)
+    assert np.all(d_off < SbmpcParams().cpa_required)
+    np.testing.assert_array_equal(off, on)
+
+
+def test_near_the_route_end_slowing_down_beats_sailing_past_it():
+    """DNV situation 18 at 1120 s (rounded): 4 km from the route's end, held 45° to starboard
+    of the guidance's course by two ships it overtook. At full speed that course runs past the
+    end along the last leg without coming within the arrival radius, where the guidance ends the
+    voyage; the same offset at half speed does not get there within the horizon (``k_miss``)."""
+    end = np.array([0.0, 9259.0])
+    geometry = dict(
+        position=[1218.0, 5466.0], course=1.6726, speed=5.143, course_ref=2.4541, speed_ref=5.144,
+        target_positions=[[-97.0, 5452.0], [10.0, 5817.0]],
+        target_velocities=[[-0.50, 3.52], [-1.08, 2.85]],
+        last=(np.radians(-45.0), 1.0), roles=np.zeros((2, 4), bool), released=[True, True],
+        destination=end, arrival_radius=150.0, end_leg_start=[0.0, 0.0],
+    )  # fmt: skip
+    chi, fac = behaviours(SbmpcParams())
+    blind, _ = hazard(SbmpcParams(k_miss=0.0), **geometry)
+    k = np.argmin(blind)
+    assert fac[k] == 1.0 and chi[k] < 0.0  # full speed on a starboard offset ...
+    g = geometry
+    own_p, *_ = predict_own(
+        SbmpcParams(), g["position"], g["course"], g["speed"], g["course_ref"], g["speed_ref"]
+    )
+    track = own_p[k]
+    assert np.all(np.hypot(*(track - end).T) > 150.0) and np.any(track[:, 1] > end[1] + 150.0)
+    seen, _ = hazard(SbmpcParams(), **geometry)  # ... runs past the end: slow down instead
+    assert fac[np.argmin(seen)] < 1.0
+    far = dict(geometry, destination=end + [0.0, 5000.0])  # beyond miss_range: no such cost
+    np.testing.assert_array_equal(*(hazard(SbmpcParams(k_miss=m), **far)[0] for m in (0.0, 10.0)))

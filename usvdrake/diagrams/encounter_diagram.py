@@ -237,6 +237,7 @@ def build_encounter_diagram(
             None if cfg.end_release_lookaheads is None else cfg.end_release_lookaheads * lookahead,
             destination=route.xy[-1],
             arrival_radius=cfg.arrival_radius_m,
+            end_leg_start=route.xy[-2],
         ),
     )
     b.Connect(targets.GetOutputPort("target_states"), ais.GetInputPort("target_states"))

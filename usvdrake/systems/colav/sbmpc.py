@@ -39,7 +39,15 @@ horizon: when the own ship is already inside a safety zone, the maximum over tim
 at the first step for every behaviour alike, and the average then prefers the behaviour that
 leaves the zone soonest. (7) Given the route's end (``destination``), a behaviour's prediction
 ends where it arrives there: a target that passes the end after the own ship is in is no hazard
-(without it, a ship whose route ends beside a target's track was held off its end).
+(without it, a ship whose route ends beside a target's track was held off its end). (8) The
+required CPA comes first (``keep_required_cpa``): when some behaviour is predicted to pass every
+target (but a stand-on one still held) at ``cpa_required`` or more, the behaviours that are not
+cost ``k_forbidden`` more; C is weighted by the relative speed, so a ship overtaking us slowly
+was otherwise passed inside the required CPA. (9) Within ``miss_range`` of the route's end
+(``destination``, with ``end_leg_start`` the last leg's start), a behaviour predicted to run
+past the end along the last leg without coming within ``arrival_radius`` costs ``k_miss``: the
+guidance ends the voyage there, and holding a starboard offset past the end is no cheaper in
+the paper's cost than slowing down until the way in is clear.
 
 Use: pass the guidance's course (e.g. line-of-sight, which steers back to the route) as the
 nominal course and let the autopilot steer nominal + offset at nominal speed × factor at all
@@ -128,6 +136,15 @@ class SbmpcParams:
     # route's course at most, so a ship released while on a give-way offset for another target
     # may return to its route: shorter paths, see docs/experiments/colav-tuning.md)
     stand_on_limit_from_release: bool = True
+    # a behaviour predicted to pass a target (other than a stand-on one still held) nearer than
+    # ``cpa_required`` is ranked below every behaviour predicted to keep it, when one does: the
+    # required CPA is the must, the weighted risk only orders what keeps it (our addition)
+    keep_required_cpa: bool = True
+    # within ``miss_range`` of the route's end, a behaviour predicted to go past the end along
+    # the last leg without coming within the arrival radius costs ``k_miss``: the guidance ends
+    # the voyage there, so slowing down until the way in is clear is cheaper (our addition)
+    k_miss: float = 10.0
+    miss_range: float = 4000.0
 
     @classmethod
     def for_safety_distance(
@@ -144,6 +161,7 @@ class SbmpcParams:
             d_close=base.d_close * s,
             d_init=base.d_init * s,
             stand_on_range=base.stand_on_range * s,
+            miss_range=base.miss_range * s,
         )
         kw.update(overrides)
         return cls(**kw)
@@ -282,6 +300,7 @@ def hazard(
     released=None,
     destination=None,
     arrival_radius: float = 0.0,
+    end_leg_start=None,
 ):
     """H_k of every behaviour and the predicted minimum distance of each: ((S,), (S,)).
 
@@ -350,6 +369,7 @@ def hazard(
         close & crossed_ahead & ((sp > params.min_target_speed) & (give_way | so_cross & ~holding))
     )
     inst = risk + params.kappa * mu + params.lam * tau
+    missed = np.zeros(chi_k.size, bool)
     if destination is not None:
         # the voyage ends where a behaviour's prediction reaches the route's end: what the
         # targets do after that is no hazard to it
@@ -360,7 +380,26 @@ def hazard(
         inst = np.where(done[:, :, None], 0.0, inst)
         risk = np.where(done[:, :, None], 0.0, risk)
         dist = np.where(done[:, :, None], np.inf, dist)
+        end = np.asarray(destination, float)
+        if (
+            end_leg_start is not None
+            and params.k_miss > 0.0
+            and np.hypot(*(pos0 - end)) < params.miss_range
+        ):
+            a = np.asarray(end_leg_start, float)
+            length = float(np.hypot(*(end - a)))
+            e = (end - a) / max(length, 1e-9)
+            past = (own_p - a) @ e >= length + arrival_radius  # the guidance's "past the end"
+            missed = np.any(past & ~reached, axis=1)
     h = inst.reshape(chi_k.size, -1).max(axis=1)
+    h += params.k_miss * missed
+    if params.keep_required_cpa:
+        # C·R weighs a pass by the relative speed: a ship overtaking us slowly costs little
+        # even inside the required CPA, so the weighted risk alone may prefer breaking it
+        near = np.where(holding[None, None, :], np.inf, dist).reshape(chi_k.size, -1).min(axis=1)
+        keeps = near >= params.cpa_required
+        if np.any(keeps):
+            h = h + np.where(keeps, 0.0, params.k_forbidden)
     # Already inside a safety zone, every behaviour's maximum sits at t ≈ 0 and is the same for
     # all; the time-average of the risk then tells which behaviour leaves the zone soonest.
     h += params.k_mean * risk.mean(axis=1).sum(axis=1)
@@ -385,7 +424,7 @@ class Sbmpc:
     def decide(
         self, position, course, speed, course_ref, speed_ref, tracks=None, *, positions=None,
         velocities=None, ids=None, path_course=None, hold_stand_on=True, destination=None,
-        arrival_radius=0.0,
+        arrival_radius=0.0, end_leg_start=None,
     ) -> SbmpcDecision:  # fmt: skip
         """Choose (course offset, speed factor) from the own state (position [m], course [rad],
         speed [m/s]), the nominal course and speed from guidance, and the targets: `tracks`
@@ -395,7 +434,8 @@ class Sbmpc:
         (default the nominal course). `hold_stand_on` False: no stand-on duty bounds the course
         (``hold_until_clear``; e.g. near the route's end, which the ship must still make).
         `destination`: the route's end; each behaviour's prediction stops counting hazards
-        from the step after it comes within `arrival_radius` [m] of it."""
+        from the step after it comes within `arrival_radius` [m] of it; with `end_leg_start`
+        (the last leg's start) one that runs past the end without arriving costs `k_miss`."""
         if tracks is not None:
             positions = [tr.position for tr in tracks]
             velocities = [tr.velocity for tr in tracks]
@@ -438,7 +478,7 @@ class Sbmpc:
             return SbmpcDecision(0.0, 1.0, i0, 0.0, np.zeros(self._chi.size), np.inf, False)
         costs, dmin = hazard(
             self.params, pos0, course, speed, course_ref, speed_ref, tp, tv, self.last, roles,
-            released, destination, arrival_radius,
+            released, destination, arrival_radius, end_leg_start,
         )  # fmt: skip
         if roles is not None and self.params.hold_until_clear:
             ref = course_ref if path_course is None else path_course

@@ -43,7 +43,8 @@ class SbmpcColav(LeafSystem):
     ``hold_stand_on``): a stand-on ship held off its route there would miss its end. The
     ``Sbmpc`` (last choice, remembered COLREG roles) is abstract state; the last decision is
     discrete state. ``destination`` (the route's end [x, y]) and ``arrival_radius`` [m]: the
-    predictions end where they arrive (``Sbmpc.decide``).
+    predictions end where they arrive, and with ``end_leg_start`` (the last leg's start) a
+    prediction that runs past the end without arriving costs more (``Sbmpc.decide``).
     """
 
     def __init__(
@@ -54,6 +55,7 @@ class SbmpcColav(LeafSystem):
         end_release: float | None = None,
         destination=None,
         arrival_radius: float = 0.0,
+        end_leg_start=None,
     ):
         super().__init__()
         if not period > 0.0:
@@ -66,6 +68,7 @@ class SbmpcColav(LeafSystem):
         self._end_release = end_release
         self._destination = None if destination is None else np.asarray(destination, float)
         self._arrival = float(arrival_radius)
+        self._leg_start = None if end_leg_start is None else np.asarray(end_leg_start, float)
         self._tracks = self.DeclareAbstractInputPort("tracks", AbstractValue.Make([]))
         self._sbmpc = self.DeclareAbstractState(AbstractValue.Make(Sbmpc(params)))
         initial = np.array([0.0, 1.0, 0.0, np.inf, 0.0, 0.0, 0.0, 0.0])
@@ -99,7 +102,7 @@ class SbmpcColav(LeafSystem):
             [x, y], course, sog, float(course_ref),
             float(speed_ref), self._tracks.Eval(context),
             path_course=path, hold_stand_on=hold, destination=self._destination,
-            arrival_radius=self._arrival,
+            arrival_radius=self._arrival, end_leg_start=self._leg_start,
         )  # fmt: skip
         ms = 1e3 * (time.perf_counter() - t0)
         count = context.get_discrete_state(self._diag).GetAtIndex(6) + 1.0
