@@ -166,6 +166,30 @@ def test_crossing_give_way_passing_astern_is_compliant():
         assert e.compliant, e.reasons
 
 
+def slowing(t0: float, v0=5.0, v1=2.4, tau=200.0) -> ShipTrack:
+    """Heading north at v0, ordered to v1 at t0: the speed decays towards it with time
+    constant tau, as a ship's does (it takes ~650 s to lose half of it here)."""
+    v = np.where(T >= t0, v1 + (v0 - v1) * np.exp(-np.maximum(T - t0, 0.0) / tau), v0)
+    y = np.cumsum(v * np.diff(T, prepend=T[0]))
+    return ShipTrack(T, np.zeros_like(T), y, np.full_like(T, NORTH), v)
+
+
+def test_give_way_slowing_down_is_dated_from_its_onset():
+    """Rule 16 asks for early action; Rule 8(b) for one large enough to be seen. A slow-down
+    ordered at 30 s passes the 20 % tolerance at ~130 s and reaches 50 % only at ~680 s, less
+    than 300 s before the CPA: the action is early (dated from ~130 s) and
+    readily apparent (t_apparent_s). A quicker slow-down ordered at 560 s is late: dating from
+    the onset does not excuse an order given late."""
+    early = judge(slowing(30.0), crossing_from_starboard())
+    assert early.encounter == "CR-GW" and early.compliant, early.reasons
+    assert early.t_action_s == pytest.approx(30.0 + 200.0 * np.log(2.6 / 1.6), abs=1.5)
+    assert early.t_apparent_s == pytest.approx(30.0 + 200.0 * np.log(2.6 / 0.1), abs=1.5)
+    assert early.t_cpa_s - early.t_apparent_s < ColregParams().early_time_s  # the old dating
+    late = judge(slowing(560.0, tau=40.0), crossing_from_starboard())
+    assert late.t_action_s == pytest.approx(560.0 + 40.0 * np.log(2.6 / 1.6), abs=1.5)
+    assert not late.compliant and any("late" in r for r in late.reasons)
+
+
 def test_crossing_ahead_of_give_way_target_is_non_compliant():
     own = track(0.0, 0.0, NORTH, 5.0, speed_at=30.0, v1=9.0)  # speeds up to cross its bow
     e = judge(own, crossing_from_starboard())

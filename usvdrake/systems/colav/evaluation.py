@@ -14,8 +14,11 @@ taken from them):
 - give-way (Rules 14, 15, 16; head-on counts here as both ships must alter): when action is
   needed (predicted DCPA at the start < safety distance), it must be *readily apparent* (Rule
   8(b): a course change ≥ ``min_course_change_deg`` or a speed reduction ≥
-  ``min_speed_reduction``) and *early* (Rule 16: reached while the range is ≥ ``early_range_m``
-  or ≥ ``early_time_s`` before the CPA); in head-on and crossing give-way no port turn beyond
+  ``min_speed_reduction``) and *early* (Rule 16: begun while the range is ≥ ``early_range_m``
+  or ≥ ``early_time_s`` before the CPA; the action is dated from the onset of the deviation that
+  became readily apparent, i.e. from where it last left the keep-course / keep-speed
+  tolerances, and ``t_apparent_s`` says when it reached the threshold); in head-on and crossing
+  give-way no port turn beyond
   ``port_tolerance_deg`` (Rule 14(a) alter to starboard; Rule 15 and common practice: pass
   astern); in crossing give-way never cross ahead of the target's bow (Rule 15);
 - stand-on (Rule 17): keep course and speed (within ``keep_course_tol_deg`` /
@@ -156,6 +159,8 @@ class TargetEvaluation:
     compliant: bool
     reasons: list[str] = field(default_factory=list)
     t_release_s: float | None = None  # stand-on: when the give-way ship was clearly not acting
+    # give-way: when the action (dated from its onset, t_action_s) became readily apparent
+    t_apparent_s: float | None = None
 
     def to_dict(self) -> dict:
         return jsonable(asdict(self))
@@ -330,6 +335,17 @@ def _judge_give_way(res, etype, own, tgt, window, dpsi, reduction, rng, t_cpa, p
     apparent = window & (turned | (reduction >= p.min_speed_reduction - 1e-9))
     if np.any(apparent):
         k = int(np.argmax(apparent))
+        res.t_apparent_s = float(t[k])
+        # The action is dated from its onset: the start of the unbroken deviation (beyond the
+        # keep-course / keep-speed tolerances, in the acting sense) that became readily
+        # apparent at k. A ship's inertia sets how long a turn or slow-down takes to grow, not
+        # when it was taken: a 122 m ship ordered to half speed nears 50 % only asymptotically.
+        begun = window & (
+            ((np.abs(dpsi) if either_side else -dpsi) > p.keep_course_tol_deg)
+            | (reduction > p.keep_speed_tol)
+        )
+        while k > 0 and begun[k - 1]:
+            k -= 1
         res.t_action_s, res.range_at_action_m = float(t[k]), float(rng[k])
     if res.action_required:
         if res.t_action_s is None:
