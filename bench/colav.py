@@ -91,6 +91,9 @@ def _set_summary(which: str, own: str, cfg, args, prefix: str) -> dict:
         "collisions": s["collisions"],
         "min_cpa_m": round(s["min_cpa_m"], 2),
         "cpa_met": cpa_met,
+        # which, and the range at the start of their nearest target: a CPA can only be kept by
+        # a ship that starts outside it (bench/colav_reachability.py tries every behaviour)
+        "cpa_missed": [e["situation"] for e in entries if e["min_cpa_m"] < safety],
         "colreg_compliance": round(s["colreg_compliance"], 4),
         "encounters": s["encounters"],
         "arrived": s["arrived"],

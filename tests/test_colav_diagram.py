@@ -1,6 +1,7 @@
 """The traffic-situation diagram (issue 37): its shells, its wiring (the autonomy sees the
 targets only through AIS), and one DNV situation end to end through ``usvdrake encounter``."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -13,7 +14,9 @@ from usvdrake.diagrams.encounter_diagram import (
     AUTONOMY,
     WORLD,
     build_encounter_diagram,
+    own_ship_params,
     route_time,
+    sbmpc_params,
 )
 from usvdrake.run.encounter import prepare, run_encounter, situation_paths
 from usvdrake.systems.colav.route_los import advance_leg, arrived, los_course
@@ -182,6 +185,22 @@ def test_head_on_end_to_end_through_the_command(tmp_path, capsys):
     assert header == "t_s,lat_deg,lon_deg,heading_deg,sog_kn"
     printed = capsys.readouterr().out
     assert "HO" in printed and "compliant" in printed
+
+
+def test_an_sbmpc_of_one_behaviour_holds_it():
+    """``run_encounter(sbmpc=...)`` replaces the own ship's SB-MPC (bench/colav_reachability.py
+    holds one behaviour this way): allowed only "keep course and speed", the head-on ship is
+    run down; allowed only a 45° starboard turn, it is passed wide."""
+    situation, cfg = prepare(HEAD_ON)
+    base = sbmpc_params(own_ship_params(situation), cfg.safety_distance_m)
+    cpa = {}
+    for offset in (0.0, -45.0):
+        one = dataclasses.replace(base, course_offsets_deg=(offset,), speed_factors=(1.0,))
+        r = run_encounter(HEAD_ON, None, duration=1200.0, plot=False, sbmpc=one)
+        (target,) = r["evaluation"].targets
+        cpa[offset] = target.cpa_m
+        assert r["evaluation"].collisions == (1 if offset == 0.0 else 0)
+    assert cpa[0.0] < 100.0 < 0.5 * NMI < cpa[-45.0]
 
 
 def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys):

@@ -44,7 +44,7 @@ from usvdrake.systems.colav.evaluation import (
     write_json,
     write_situation_outputs,
 )
-from usvdrake.systems.colav.sbmpc import NMI
+from usvdrake.systems.colav.sbmpc import NMI, SbmpcParams
 from usvdrake.systems.colav.scaling import froude_scaled
 from usvdrake.systems.colav.situation import (
     CANAL_DIR,
@@ -186,6 +186,7 @@ def run_encounter(
     progress: bool = False,
     own: str = SHIP,
     replay: bool = False,
+    sbmpc: SbmpcParams | None = None,
 ) -> dict:
     """Simulate one traffic situation until the own ship arrives or ``duration`` (default
     :func:`default_duration`) elapses, evaluate it, and write its files to ``out_dir`` (if
@@ -194,7 +195,8 @@ def run_encounter(
     SituationEvaluation), ``sim_time_s``, ``wall_s``, ``done`` (arrived before the time limit),
     ``decide_ms`` (every SB-MPC decision's time), ``decisions``, ``own``, ``length_scale``,
     ``safety_distance_m`` (at the run's scale) and ``files``. ``replay``: also write
-    ``replay.html``, a Meshcat replay with every ship to scale (``viz.encounter_replay``)."""
+    ``replay.html``, a Meshcat replay with every ship to scale (``viz.encounter_replay``).
+    ``sbmpc``: SB-MPC parameters instead of the own ship's defaults (at the run's scale)."""
     situation, cfg = prepare(situation_path, own, config)
     settings = load_encounter_settings(settings_path_for(situation_path))
     name = Path(situation_path).stem
@@ -203,7 +205,7 @@ def run_encounter(
         raise ConfigError("encounter", "duration", "a positive number of seconds", limit)
     builder = DiagramBuilder()
     encounter = builder.AddNamedSystem(
-        "encounter", build_encounter_diagram(situation, own, config=cfg)
+        "encounter", build_encounter_diagram(situation, own, config=cfg, sbmpc=sbmpc)
     )
     logs = {
         port: LogVectorOutput(encounter.GetOutputPort(port), builder, LOG_PERIOD_S)
