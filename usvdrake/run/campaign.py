@@ -50,6 +50,7 @@ from __future__ import annotations
 import dataclasses
 import html
 import json
+import logging
 import math
 import os
 import re
@@ -62,7 +63,7 @@ from pathlib import Path
 
 import dask
 import numpy as np
-from dask.distributed import Client, LocalCluster, as_completed
+from dask.distributed import Client, LocalCluster, WorkerPlugin, as_completed
 from matplotlib.figure import Figure
 from pydrake.common.yaml import yaml_load_typed
 from tqdm import tqdm
@@ -243,6 +244,28 @@ def _failed(e: BaseException, tb: str | None = None, **extra) -> dict:
     }
 
 
+HEARTBEAT_LOST = "Failed to communicate with scheduler during heartbeat"
+
+
+def drop_closing_heartbeat(record: logging.LogRecord) -> bool:
+    """A logging filter: False for a worker's heartbeat that found the scheduler gone."""
+    return not record.getMessage().startswith(HEARTBEAT_LOST)
+
+
+class QuietHeartbeat(WorkerPlugin):
+    """Filters the worker's "Failed to communicate with scheduler during heartbeat" traceback
+    out of its log: when a LocalCluster closes, a heartbeat in flight can meet the scheduler
+    already gone and print it on our stderr (dask/distributed#7105, open). A scheduler lost in
+    the middle of a run fails its futures, which the runners report, so nothing is hidden."""
+
+    name = "usvdrake-quiet-heartbeat"
+
+    def setup(self, worker) -> None:
+        logger = logging.getLogger("distributed.worker")
+        if drop_closing_heartbeat not in logger.filters:
+            logger.addFilter(drop_closing_heartbeat)
+
+
 @contextmanager
 def dask_client(workers: int, scheduler: str | None):
     if scheduler:
@@ -271,6 +294,7 @@ def dask_client(workers: int, scheduler: str | None):
         Client(cluster) as client,
     ):
         restore()
+        client.register_plugin(QuietHeartbeat())
         yield client
 
 
