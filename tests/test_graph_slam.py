@@ -17,6 +17,7 @@ from usvdrake.systems.slam.graph_slam import (
     compose_covariance,
     odometry_covariance,
 )
+from usvdrake.systems.slam.occupancy_mapping import LogOddsGrid
 from usvdrake.worlds import box, cylinder
 from usvdrake.worlds.raycast import cast
 from usvdrake.worlds.synthetic import HOKUYO, cluttered_room
@@ -40,7 +41,7 @@ POND = World(
 )
 
 
-def loop_run(noise: bool, laps: float = 1.15, steps: int = 300):
+def loop_run(noise: bool, laps: float = 1.15, steps: int = 300, live_map: bool = True):
     """Drive an ellipse around the island (a ~75 m loop) scanning with a Hokuyo."""
     preset = preset_by_name("hokuyo_utm30lx")
     model = LidarModel(
@@ -54,7 +55,9 @@ def loop_run(noise: bool, laps: float = 1.15, steps: int = 300):
     xs, ys = 14 * np.cos(a), 8 * np.sin(a)
     heading = np.arctan2(8 * np.cos(a), -14 * np.sin(a))
     slam = GraphSlam(
-        GraphSlamConfig(map_resolution=0.1, map_origin=[-25.0, -15.0], map_size=[50.0, 30.0]),
+        GraphSlamConfig(
+            map_resolution=0.1, map_origin=[-25.0, -15.0], map_size=[50.0, 30.0], live_map=live_map
+        ),
         (xs[0], ys[0], heading[0]),
     )
     angles = model.layout.azimuths
@@ -117,6 +120,22 @@ def test_map_marks_walls_and_water(noisy_loop):
     r, c = grid.to_cell(np.array([20.05, 0.0, 17.0]), np.array([0.0, 11.95, 0.0]))
     assert grid.data[r[0], c[0]] == 100 and grid.data[r[1], c[1]] == 100  # walls
     assert grid.data[r[2], c[2]] == 0  # open water the boat crossed
+
+
+def test_a_map_left_to_the_end_is_every_scan_at_its_final_pose(noisy_loop):
+    """``live_map`` False (offline runs): the map plays no part in the estimate (the same
+    trajectory to the bit), stays empty until ``render_map``, which draws every node's scan at
+    its final pose, and then marks the walls and the water as the live map does."""
+    slam, est, _ = loop_run(noise=True, live_map=False)
+    np.testing.assert_array_equal(est, noisy_loop[1])
+    np.testing.assert_array_equal(slam.trajectory(), noisy_loop[0].trajectory())
+    assert np.all(slam.map.to_occupancy_grid().data == -1)
+    slam.render_map()
+    fresh = LogOddsGrid(slam.map.origin, slam.map.resolution, slam.map.shape)
+    for node in slam.nodes:
+        fresh.insert_scan(node.pose, node.ranges, node.angles, slam.cfg.max_range)
+    np.testing.assert_array_equal(slam.map.to_occupancy_grid().data, fresh.to_occupancy_grid().data)
+    test_map_marks_walls_and_water((slam,))
 
 
 def test_deepcopy_is_independent_and_shares_scans(noisy_loop):

@@ -252,6 +252,8 @@ def run_graph_slam(
         anchors.append((max(len(slam.nodes) - 1, 0), slam._rel.copy()))
     slam.optimise_pending()
     slam.relink(progress)  # (cfg.relink_radius > 0) the final estimate relinked, re-optimised
+    if not cfg.live_map:
+        slam.render_map()  # every scan once, at its final pose (in the wall time)
     poses = np.array(
         [compose(slam.nodes[i].pose, rel) if slam.nodes else rel for i, rel in anchors]
     )
@@ -356,6 +358,7 @@ def run_slam2d(
         map_origin=[-100.0, -100.0],
         map_size=[200.0, 200.0],
         max_range=max_range,
+        live_map=False,  # nothing reads the map before the end: drawn once at the final poses
     )
     if full_in_worker is not None:
         cfg = replace(cfg, full_in_worker=full_in_worker)

@@ -137,5 +137,10 @@ class GraphSlamConfig:
     map_origin: list[float] = field(default_factory=lambda: [-150.0, -150.0])  # [m]
     map_size: list[float] = field(default_factory=lambda: [300.0, 300.0])  # [m] width, height
     max_range: float = 30.0  # [m] beyond this a beam counts as no return for the map
+    # each node's scan rendered into the log-odds map as it comes, the moved ones re-rendered
+    # after each optimisation (a LeafSystem's map port reads it at any time); False: nothing is
+    # rendered until ``GraphSlam.render_map`` renders every node at its final pose (offline
+    # runs: the map was a fifth of raw MIT-CSAIL's time, and nothing reads it before the end)
+    live_map: bool = True
     rerender_translation: float = 0.05  # [m]
     rerender_rotation: float = 0.01  # [rad]

@@ -148,13 +148,23 @@ class GraphSlam(TrackingMixin, OdometryMixin, LoopMixin, RelinkMixin, Optimisati
 
     # --- map ------------------------------------------------------------------------------------
     def _render(self, node: Node) -> None:
+        if not self.cfg.live_map:
+            return  # render_map() draws it at its final pose
         self.map.insert_scan(node.pose, node.ranges, node.angles, self.cfg.max_range)
         node.rendered_pose = node.pose.copy()
+
+    def render_map(self) -> None:
+        """The map drawn afresh: every node's scan at its present pose (what ``live_map`` =
+        False leaves to the end of a run)."""
+        self.map = LogOddsGrid(self.map.origin, self.map.resolution, self.map.shape)
+        for node in self.nodes:
+            self.map.insert_scan(node.pose, node.ranges, node.angles, self.cfg.max_range)
+            node.rendered_pose = node.pose.copy()
 
     def _rerender_moved(self, indices) -> None:
         """Re-render the scans of the nodes ``indices`` whose pose has moved from the one they
         were rendered at by more than ``rerender_translation`` / ``rerender_rotation``."""
-        if not len(indices):
+        if not len(indices) or not self.cfg.live_map:
             return
         nodes = [self.nodes[k] for k in indices]
         d = between([n.rendered_pose for n in nodes], [n.pose for n in nodes])
