@@ -137,10 +137,10 @@ def test_a_rival_floor_gives_the_exact_searchs_answer_to_is_there_a_rival():
         )
 
 
-def test_three_level_search_equals_the_exhaustive_one_past_the_fields_edges():
-    """A window wider than the field's margin puts points off the table on every side: the top
-    and coarse bounds of blocks that start off it but reach into it must still bound them (the
-    table's first cells do), so the search returns the exhaustive grid's best."""
+def test_the_levelled_search_equals_the_exhaustive_one_past_the_fields_edges():
+    """A window wider than the field's margin puts points off the table on every side: the
+    top2, top, mid and coarse bounds of blocks that start off it but reach into it must still
+    bound them (the table's first cells do), so the search returns the exhaustive grid's best."""
     scene = cluttered_room()
     ref, cur = points(scene, (0.0, 0.0, 0.0)), points(scene, (0.62, -0.47, np.deg2rad(4.0)))
     sub = cur[:: -(-len(cur) // 60)]
