@@ -96,6 +96,24 @@ def corridor(shift: float) -> np.ndarray:
     return pts[np.abs(pts[:, 0]) < 10.0] - [shift, 0.0]
 
 
+def test_a_least_score_drops_only_matches_below_it():
+    """``min_score``: a best above it is the plain search's (pose, score and runner-up); when
+    the best is below it the match is the guess with score 0, which a caller refusing scores
+    below it refuses as it refused the plain answer."""
+    scene = cluttered_room()
+    room = LikelihoodField.build(points(scene, (0.0, 0.0, 0.0)), 0.05, 0.1, margin=2.5)
+    cur, guess = points(scene, (0.3, 0.2, 0.1)), (0.1, -0.1, 0.0)
+    plain = correlative_match(room, cur, guess, 1.5, 0.3, distinct=0.5)
+    for least in (0.5 * plain.score, plain.score):
+        m = correlative_match(room, cur, guess, 1.5, 0.3, distinct=0.5, min_score=least)
+        assert np.array_equal(m.pose, plain.pose) and m.score == plain.score
+        assert m.runner_up == plain.runner_up
+    above = correlative_match(room, cur, guess, 1.5, 0.3, min_score=min(1.01 * plain.score, 1))
+    assert above.score == 0.0 and np.array_equal(above.pose, guess)
+    with pytest.raises(ValueError, match="lateral prior"):
+        correlative_match(room, cur, min_score=0.5, prior_from=(0, 0, 0), lateral_weight=0.25)
+
+
 def test_runner_up_exposes_a_repeating_corridor_but_not_a_room():
     ref = corridor(0.0)
     field = LikelihoodField.build(ref, 0.05, 0.1, margin=2.5)
@@ -138,6 +156,14 @@ def test_a_rival_floor_gives_the_exact_searchs_answer_to_is_there_a_rival():
                 assert m.runner_up == 0.0 and m.runner_up_pose is None
             # so "is a rival above the fraction?" is answered as by the exact search
             assert (m.runner_up > above * m.score) == (exact.runner_up > above * exact.score)
+            # and as soon as one is found with first_rival: the same answer, not the best rival
+            q = correlative_match(
+                f, cur, (0.0, 0.0, 0.0), 1.5, angle, distinct=0.5, rival_above=above,
+                first_rival=True,
+            )  # fmt: skip
+            assert np.array_equal(q.pose, exact.pose) and q.score == exact.score
+            assert (q.runner_up > above * q.score) == (exact.runner_up > above * exact.score)
+            assert q.runner_up <= exact.runner_up
     with pytest.raises(ValueError, match="rival_above"):
         correlative_match(room, cases[1][1], distinct=0.5, rival_above=1.5)
     with pytest.raises(ValueError, match="lateral prior"):

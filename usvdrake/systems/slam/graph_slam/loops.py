@@ -86,8 +86,11 @@ class LoopMixin:
                 self.cfg.loop_linear_window,
                 self.cfg.loop_angular_window,
                 distinct=self.cfg.loop_distinct,
-                # only whether a rival comes that close matters, not its exact score
+                # only whether a rival comes that close matters, not its score or the best one
                 rival_above=min(max(self.cfg.max_loop_ambiguity, 0.0), 1.0),
+                first_rival=True,
+                # nor any pose that scores below a loop's least: that search fails sooner
+                min_score=min(max(self.cfg.min_loop_score, 0.0), 1.0),
             )
             guess = match.pose
             # a weak fit, or one the scene repeats (a corridor): not a loop
