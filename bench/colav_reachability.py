@@ -25,7 +25,7 @@ from usvdrake.systems.colav.situation import load_situation
 
 
 def held_behaviours(path, hold_s: float, config: EncounterConfig) -> dict:
-    situation, cfg = prepare(path, config=config)
+    situation, cfg = prepare(path, config=config)  # cfg at the situation's scale
     base = sbmpc_params(own_ship_params(situation), cfg.safety_distance_m)
     own = situation.own_ship
     ranges = {tgt.id: float(np.hypot(*(tgt.xy[0] - own.xy[0]))) for tgt in situation.targets}
@@ -34,7 +34,8 @@ def held_behaviours(path, hold_s: float, config: EncounterConfig) -> dict:
     for chi in base.course_offsets_deg:
         for fac in base.speed_factors:
             one = dataclasses.replace(base, course_offsets_deg=(chi,), speed_factors=(fac,))
-            r = run_encounter(path, None, cfg, duration=hold_s, plot=False, sbmpc=one)
+            # (run_encounter scales ``config`` itself: it takes the ship-scale one)
+            r = run_encounter(path, None, config, duration=hold_s, plot=False, sbmpc=one)
             cpas = {t.target_id: float(t.cpa_m) for t in r["evaluation"].targets}
             runs.append({"offset_deg": chi, "speed_factor": fac, "cpa_m": cpas})
             for tid, c in cpas.items():

@@ -14,11 +14,9 @@ taken from them):
 - give-way (Rules 14, 15, 16; head-on counts here as both ships must alter): when action is
   needed (predicted DCPA at the start < safety distance), it must be *readily apparent* (Rule
   8(b): a course change ≥ ``min_course_change_deg`` or a speed reduction ≥
-  ``min_speed_reduction``) and *early* (Rule 16: begun while the range is ≥ ``early_range_m``
-  or ≥ ``early_time_s`` before the CPA; the action is dated from the onset of the deviation that
-  became readily apparent, i.e. from where it last left the keep-course / keep-speed
-  tolerances, and ``t_apparent_s`` says when it reached the threshold); in head-on and crossing
-  give-way no port turn beyond
+  ``min_speed_reduction``) and *early* (Rule 16: begun, where it last left the keep-course /
+  keep-speed tolerances, while the range is ≥ ``early_range_m`` or ≥ ``early_time_s`` before the
+  CPA); in head-on and crossing give-way no port turn beyond
   ``port_tolerance_deg`` (Rule 14(a) alter to starboard; Rule 15 and common practice: pass
   astern); in crossing give-way never cross ahead of the target's bow (Rule 15);
 - stand-on (Rule 17): keep course and speed (within ``keep_course_tol_deg`` /
@@ -159,8 +157,7 @@ class TargetEvaluation:
     compliant: bool
     reasons: list[str] = field(default_factory=list)
     t_release_s: float | None = None  # stand-on: when the give-way ship was clearly not acting
-    # give-way: when the action (dated from its onset, t_action_s) became readily apparent
-    t_apparent_s: float | None = None
+    t_apparent_s: float | None = None  # give-way: when the action became readily apparent
 
     def to_dict(self) -> dict:
         return jsonable(asdict(self))
@@ -330,20 +327,16 @@ def evaluate_target(
 def _judge_give_way(res, etype, own, tgt, window, dpsi, reduction, rng, t_cpa, p):
     t = own.t
     # Readily apparent: a turn to starboard (either side when overtaking, Rule 13) or a slow-down.
-    either_side = etype is EncounterType.OVERTAKING_GIVE_WAY
-    turned = (np.abs(dpsi) if either_side else -dpsi) >= p.min_course_change_deg
-    apparent = window & (turned | (reduction >= p.min_speed_reduction - 1e-9))
+    turn = np.abs(dpsi) if etype is EncounterType.OVERTAKING_GIVE_WAY else -dpsi
+    apparent = window & (
+        (turn >= p.min_course_change_deg) | (reduction >= p.min_speed_reduction - 1e-9)
+    )
     if np.any(apparent):
         k = int(np.argmax(apparent))
         res.t_apparent_s = float(t[k])
-        # The action is dated from its onset: the start of the unbroken deviation (beyond the
-        # keep-course / keep-speed tolerances, in the acting sense) that became readily
-        # apparent at k. A ship's inertia sets how long a turn or slow-down takes to grow, not
-        # when it was taken: a 122 m ship ordered to half speed nears 50 % only asymptotically.
-        begun = window & (
-            ((np.abs(dpsi) if either_side else -dpsi) > p.keep_course_tol_deg)
-            | (reduction > p.keep_speed_tol)
-        )
+        # dated from its onset (the unbroken deviation beyond the keep tolerances that became
+        # apparent at k): a 122 m ship ordered to half speed nears 50 % only asymptotically
+        begun = window & ((turn > p.keep_course_tol_deg) | (reduction > p.keep_speed_tol))
         while k > 0 and begun[k - 1]:
             k -= 1
         res.t_action_s, res.range_at_action_m = float(t[k]), float(rng[k])

@@ -373,14 +373,14 @@ def hazard(
     if destination is not None:
         # the voyage ends where a behaviour's prediction reaches the route's end: what the
         # targets do after that is no hazard to it
-        there = np.hypot(*(own_p - np.asarray(destination, float)).transpose(2, 0, 1))
+        end = np.asarray(destination, float)
+        there = np.hypot(*(own_p - end).transpose(2, 0, 1))
         reached = np.cumsum(there <= arrival_radius, axis=1) > 0
         done = np.zeros_like(reached)
         done[:, 1:] = reached[:, :-1]  # from the step after the first arrival
         inst = np.where(done[:, :, None], 0.0, inst)
         risk = np.where(done[:, :, None], 0.0, risk)
         dist = np.where(done[:, :, None], np.inf, dist)
-        end = np.asarray(destination, float)
         if (
             end_leg_start is not None
             and params.k_miss > 0.0

@@ -312,13 +312,14 @@ def _branch_and_bound(
 ):
     """(score, θ index, i, j, found): the best fine candidate of a window of nf × nf
     translations whose score exceeds ``floor`` (found False, and (0, 0, 0), if none does),
-    searched best-first over four levels of bounds (Olson 2009 §IV-B, with more levels as in
+    searched best-first over five levels of bounds (Olson 2009 §IV-B, with more levels as in
     Hess et al. 2016's branch and bound): cells of (2·k·m)² translations scored on ``top2``
     for every rotation (each a sum over the points, bx/by their base cells of
     :func:`_base_cells`), their 2 × 2 top cells on ``top`` when that bound can still reach the
-    best score, their m × m blocks on ``coarse`` likewise, the fine candidates of a block on
-    ``fine`` likewise. (Over ±92° a scan has ~1000 rotations: scoring 4 cells a rotation rather
-    than 16 more than pays for the top cells then opened.)
+    best score, a top cell's 2 × 2 blocks on ``mid`` likewise, a mid block's (m/2)² blocks on
+    ``coarse`` likewise, the k × k fine candidates of a block on ``fine`` likewise. (Over ±92°
+    a scan has ~1000 rotations: scoring 4 cells a rotation rather than 16 more than pays for the
+    top cells then opened.)
 
     Ties go where the two-level search over coarse cells in decreasing bound order put them
     (the same answer, to the bit, as that search wherever its bounds held): among the fine

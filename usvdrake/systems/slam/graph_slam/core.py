@@ -148,8 +148,10 @@ class GraphSlam(TrackingMixin, OdometryMixin, LoopMixin, RelinkMixin, Optimisati
 
     # --- map ------------------------------------------------------------------------------------
     def _render(self, node: Node) -> None:
-        if not self.cfg.live_map:
-            return  # render_map() draws it at its final pose
+        if self.cfg.live_map:  # else render_map() draws it at its final pose
+            self._draw(node)
+
+    def _draw(self, node: Node) -> None:
         self.map.insert_scan(node.pose, node.ranges, node.angles, self.cfg.max_range)
         node.rendered_pose = node.pose.copy()
 
@@ -158,8 +160,7 @@ class GraphSlam(TrackingMixin, OdometryMixin, LoopMixin, RelinkMixin, Optimisati
         False leaves to the end of a run)."""
         self.map = LogOddsGrid(self.map.origin, self.map.resolution, self.map.shape)
         for node in self.nodes:
-            self.map.insert_scan(node.pose, node.ranges, node.angles, self.cfg.max_range)
-            node.rendered_pose = node.pose.copy()
+            self._draw(node)
 
     def _rerender_moved(self, indices) -> None:
         """Re-render the scans of the nodes ``indices`` whose pose has moved from the one they
