@@ -1007,3 +1007,75 @@ def test_loop_spacing_lets_only_nodes_that_far_apart_look_for_loops():
     est = spaced.trajectory()
     path = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(est[:, :2], axis=0).T))])
     assert np.all(np.diff(path[closing]) >= 1.5 - 0.05)
+
+
+def _two_passes(drift: float = 0.5):
+    """(slam, truth): 40 nodes 0.1 m apart along x (0-19 the first pass, 20-39 the second over
+    the same ground), the second pass's graph poses ``drift`` [m] ahead along x."""
+    from usvdrake.systems.slam.graph_slam import Node
+
+    slam = GraphSlam(replace(POND_GRID, loop_confirm_nodes=5))
+    truth = []
+    for k in range(40):
+        pose = np.array([0.1 * (k % 20), 0.0, 0.0])
+        truth.append(pose)
+        shown = pose + [drift if k >= 20 else 0.0, 0.0, 0.0]
+        slam.nodes.append(Node(shown, np.zeros((1, 2)), np.array([np.inf]), np.zeros(1), k))
+    return slam, truth
+
+
+def _loop(truth, i, k, off=(0.0, 0.0, 0.0)):
+    from usvdrake.systems.slam.graph_slam import Constraint
+
+    z = between(truth[i], truth[k]) + np.asarray(off)
+    return Constraint(i, k, z, np.eye(3) * 1e-4, False, "loop")
+
+
+def test_a_loop_joins_the_graph_once_a_second_one_agrees_with_it():
+    """loop_confirm_nodes: a lone loop is held; the next node's loop between the same passes,
+    agreeing with it round the short cycle, brings both in; a later agreeing one joins at once,
+    an aliased one (1 m along the corridor) is held and dropped when its span runs out."""
+    slam, truth = _two_passes()
+    assert not slam._confirm_loops(25, [_loop(truth, 5, 25)])
+    assert slam.constraints == [] and len(slam._held) == 1
+    assert slam._confirm_loops(26, [_loop(truth, 6, 26, (0.03, -0.02, 0.01))])
+    assert [(c.i, c.j) for c in slam.constraints] == [(5, 25), (6, 26)]
+    assert slam._held == ()
+    assert slam._confirm_loops(28, [_loop(truth, 8, 28)])  # agrees with the admitted ones
+    assert not slam._confirm_loops(29, [_loop(truth, 9, 29, (1.0, 0.0, 0.0))])  # aliased
+    assert len(slam.constraints) == 3
+    for k in range(30, 36):
+        slam._confirm_loops(k, [])
+    assert slam._held == () and slam.stats["unconfirmed_loops"] == 1
+    assert len(slam.constraints) == 3
+
+
+def test_loops_that_disagree_or_lie_between_far_apart_nodes_do_not_confirm_each_other():
+    """Two loops 0.3 m apart in what they say (tolerance 0.2 m) stay held, as do two whose
+    older nodes are more than 50 apart (the graph's chain between them is no check); copies of
+    the SLAM keep their own held loops."""
+    slam, truth = _two_passes()
+    slam._confirm_loops(25, [_loop(truth, 5, 25)])
+    other = copy.deepcopy(slam)
+    assert not slam._confirm_loops(26, [_loop(truth, 6, 26, (0.3, 0.0, 0.0))])
+    assert not slam._confirm_loops(27, [_loop(truth, 7, 27, (0.0, 0.0, 0.08))])
+    assert slam.constraints == [] and len(slam._held) == 3
+    a, b = _loop(truth, 5, 25), _loop(truth, 6, 26)
+    assert slam._loops_agree(a, b)
+    far = replace(b, i=b.i + 60)
+    assert not slam._loops_agree(a, far)
+    assert len(other._held) == 1 and other.constraints == []
+    assert other._confirm_loops(26, [_loop(truth, 6, 26)])
+
+
+def test_the_full_problem_carries_the_gnc_step():
+    """GraphSlamConfig.gnc_step reaches the solver's problem; a larger step gives the square's
+    solve the same verdict on its loops."""
+    from usvdrake.systems.slam.pose_graph_solve import solve_pose_graph
+
+    slam, _ = _square_with_loops()
+    for step in (1.4, 3.0):
+        slam.cfg = replace(slam.cfg, gnc_step=step)
+        problem = slam._problem(full=True)
+        assert problem.gnc_step == step
+        assert solve_pose_graph(problem).rejected == {len(slam.constraints) - 1}

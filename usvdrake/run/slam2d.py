@@ -99,6 +99,7 @@ LOG_CONFIG = GraphSlamConfig(
     max_loop_ambiguity=0.7,
     loop_robust=False,
     loop_gnc=True,
+    loop_confirm_nodes=10,
     # loops as tight as a scan match (the 3 cm floor let the chain's drift win: Freiburg 079
     # 0.118 -> 0.103 m)
     loop_min_sigma=[0.01, 0.01, 0.005],
@@ -403,6 +404,8 @@ def run_slam2d(
         "slam_constraints": len(slam.constraints),
         "slam_loops": int(slam.stats["loops"]),
         "rejected_loops": int(slam.stats.get("rejected_loops", 0)),
+        # loops dropped because no second loop confirmed them (GraphSlamConfig.loop_confirm_nodes)
+        "unconfirmed_loops": int(slam.stats.get("unconfirmed_loops", 0)),
         # links of the final estimate's passes (GraphSlamConfig.relink_radius) and [s] of wall
         # time they and their optimisation took after the last scan (in wall_time_s)
         "relinks": int(slam.stats.get("relinks", 0)),

@@ -39,7 +39,7 @@ class PoseGraphProblem:
     ``i[r]``'s frame with covariance ``cov[r]``; ``robust[r]``: Barron-robustified (``alpha``,
     ``c``); ``loop_id[r]`` ≥ 0: a loop candidate GNC may reject (its id comes back in
     :attr:`PoseGraphSolution.rejected`), −1: a known inlier. GNC runs when any constraint is a
-    candidate."""
+    candidate; ``gnc_step`` the factor its μ moves by between steps."""
 
     keys: np.ndarray
     poses: np.ndarray
@@ -53,6 +53,7 @@ class PoseGraphProblem:
     alpha: float = 0.0
     c: float = 1.0
     max_iterations: int = 100
+    gnc_step: float = 1.4  # the factor GNC's μ moves by per step (Yang et al. 2020: 1.4)
 
 
 @dataclass(frozen=True)
@@ -99,6 +100,7 @@ def solve_pose_graph(problem: PoseGraphProblem) -> PoseGraphSolution:
         # the loop candidates may be outliers, everything else is a known inlier
         gnc_params = gtsam.GncLMParams(params)
         gnc_params.setLossType(gtsam.GncLossType.TLS)
+        gnc_params.setLambdaStep(p.gnc_step)
         gnc_params.setKnownInliers(inliers)
         optimiser = gtsam.GncLMOptimizer(graph, values, gnc_params)
         result = optimiser.optimize()

@@ -31,7 +31,10 @@ the
   against the candidate's neighbours by the correlative matcher and refuses fits that are weak
   (``min_loop_score``) or repeated elsewhere in the window (``max_loop_ambiguity``: corridors);
   ``loop_gnc`` makes loops Gaussian and lets each full optimisation reject inconsistent ones by
-  graduated non-convexity (Yang et al. 2020, gtsam's GncLMOptimizer with the TLS loss).
+  graduated non-convexity (Yang et al. 2020, gtsam's GncLMOptimizer with the TLS loss; its μ
+  moves by ``gnc_step`` per step). GNC cannot judge a loop that nothing else ties between two
+  passes: with ``loop_confirm_nodes`` a loop joins the graph only once a second one between the
+  same passes agrees with it (ORB-SLAM's temporal consistency, Mur-Artal et al. 2015).
 * **Map** (Pham et al. §IV): a log-odds grid; a node's scan is inserted when the node is created and
   re-rendered (removed at its old pose, inserted at its new one) when optimisation moved it by
   more than ``rerender_translation`` / ``rerender_rotation``.

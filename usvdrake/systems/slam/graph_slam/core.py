@@ -44,6 +44,10 @@ class GraphSlam(TrackingMixin, OdometryMixin, LoopMixin, RelinkMixin, Optimisati
         self._fail_streak = 0  # tracking matches failed in a row
         self._loop_from: int | None = None  # the last node that looked for loops (loop_spacing)
         self._rejected: frozenset[int] = frozenset()  # loop constraints GNC called outliers
+        # (node that found it, loop) not yet confirmed, and the loops admitted lately: tuples,
+        # replaced and never changed in place, so copies may share them (loop_confirm_nodes)
+        self._held: tuple = ()
+        self._admitted: tuple = ()
         # [m] (x, y) of every node, kept with Node.pose: the loop candidates' distances
         self._xy = np.zeros((0, 2))
         res = cfg.map_resolution
@@ -57,6 +61,7 @@ class GraphSlam(TrackingMixin, OdometryMixin, LoopMixin, RelinkMixin, Optimisati
             "loops": 0,
             "failed_matches": 0,
             "odometry_rejected": 0,  # odometry constraints left out by odometry_gate
+            "unconfirmed_loops": 0,  # loops dropped for want of a second (loop_confirm_nodes)
         }
         self.full_pending = False
         self._full_job = None  # (job, problem, node count) of the running full optimisation
@@ -91,9 +96,13 @@ class GraphSlam(TrackingMixin, OdometryMixin, LoopMixin, RelinkMixin, Optimisati
             other = self.nodes[i]
             if np.hypot(*(other.pose[:2] - node.pose[:2])) <= self.cfg.link_radius:
                 self._link(i, k, robust=False, kind="link")
-        loop = False
+        loop, found = False, [] if self.cfg.loop_confirm_nodes > 0 else None
         for i in self._loop_candidates(k) if self._loop_due(k) else ():
-            loop |= self._link(i, k, robust=self.cfg.loop_robust, kind="loop", search=True)
+            loop |= self._link(
+                i, k, robust=self.cfg.loop_robust, kind="loop", search=True, into=found
+            )
+        if found is not None:
+            loop = self._confirm_loops(k, found)
         t0 = time.perf_counter()
         self.optimise(full=False)
         self.stats["optimisation_ms"].append((time.perf_counter() - t0) * 1e3)

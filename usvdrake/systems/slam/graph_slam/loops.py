@@ -2,7 +2,8 @@
 array the candidates are searched in, the loop candidates (optionally one per pass), the
 submaps of neighbouring scans and :meth:`_link`, which matches a new node to an older one
 (PLICP, after a correlative search for loops with ``loop_linear_window``) and adds the
-constraint if the match passes the link or loop checks.
+constraint if the match passes the link or loop checks; with ``loop_confirm_nodes``, a loop is
+held until a second loop between the same passes agrees with it (:meth:`_confirm_loops`).
 """
 
 import numpy as np
@@ -10,7 +11,7 @@ from scipy.spatial import cKDTree
 
 from usvdrake.systems.slam.correlative import LikelihoodField, correlative_match
 from usvdrake.systems.slam.graph_slam.graph import Constraint
-from usvdrake.systems.slam.graph_slam.poses import between
+from usvdrake.systems.slam.graph_slam.poses import between, compose
 from usvdrake.systems.slam.plicp import plicp, rot
 
 
@@ -65,7 +66,47 @@ class LoopMixin:
                 parts.append(self.nodes[j].points @ rot(th).T + (x, y))
         return np.vstack(parts)
 
-    def _link(self, i: int, k: int, robust: bool, kind: str, search: bool = False) -> bool:
+    def _confirm_loops(self, k: int, found: list[Constraint]) -> bool:
+        """Admit the loops node k ``found`` that a loop held or admitted within the last
+        ``loop_confirm_nodes`` nodes agrees with (:meth:`_loops_agree`), with the held ones
+        they confirm; hold the others. Held loops older than that are dropped
+        (``stats["unconfirmed_loops"]``). Returns whether any loop joined the graph."""
+        span = self.cfg.loop_confirm_nodes
+        held = [(n, c) for n, c in self._held if k - n <= span]
+        self.stats["unconfirmed_loops"] += len(self._held) - len(held)
+        admitted = [c for c in self._admitted if k - c.j <= span]
+        joined = []
+        for c in found:
+            partners = [h for h in held if self._loops_agree(c, h[1])]
+            if partners or any(self._loops_agree(c, a) for a in admitted):
+                held = [h for h in held if not any(h is p for p in partners)]
+                joined += [h[1] for h in partners] + [c]
+                admitted += [h[1] for h in partners] + [c]
+            else:
+                held.append((k, c))
+        self.constraints.extend(joined)
+        self._held, self._admitted = tuple(held), tuple(admitted)
+        return bool(joined)
+
+    def _loops_agree(self, a: Constraint, b: Constraint) -> bool:
+        """Whether loops a and b, between nearby nodes (≤ 50 apart) of the same two passes, put
+        b's newer node at the same pose in a's older node's frame, each way round the short
+        cycle they make with the graph's own chains, within ``loop_confirm_tolerance``."""
+        if abs(a.i - b.i) > 50 or (a.i, a.j) == (b.i, b.j):
+            return False
+        nodes = self.nodes
+        via_a = compose(a.z, between(nodes[a.j].pose, nodes[b.j].pose))
+        via_b = compose(between(nodes[a.i].pose, nodes[b.i].pose), b.z)
+        d = via_a - via_b
+        turn = abs((d[2] + np.pi) % (2 * np.pi) - np.pi)
+        tol = self.cfg.loop_confirm_tolerance
+        return bool(np.hypot(d[0], d[1]) <= tol[0] and turn <= tol[1])
+
+    def _link(
+        self, i: int, k: int, robust: bool, kind: str, search: bool = False, into=None
+    ) -> bool:
+        """Match node k to node i (see the module); if it passes, add the constraint to the
+        graph, or to the list ``into`` when given. Returns whether it passed."""
         a, b = self.nodes[i], self.nodes[k]
         guess = between(a.pose, b.pose)
         rotation_search, pairing = search, 1.0  # PLICP's own rotation search, default pairing
@@ -134,7 +175,6 @@ class LoopMixin:
         z = res.pose
         # (against a submap, Censi's covariance takes every reference point's range noise along
         # its bearing from node i, though its neighbours' points were ranged from elsewhere)
-        self.constraints.append(
-            Constraint(i, k, z, self._covariance(reference, b.points, res), robust, kind)
-        )
+        constraint = Constraint(i, k, z, self._covariance(reference, b.points, res), robust, kind)
+        (self.constraints if into is None else into).append(constraint)
         return True

@@ -132,6 +132,7 @@ class OptimisationMixin:
             alpha=self.cfg.alpha,
             c=self.cfg.c,
             max_iterations=self.cfg.max_iterations,
+            gnc_step=self.cfg.gnc_step,
         )
         return problem
 
