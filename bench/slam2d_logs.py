@@ -122,6 +122,7 @@ def main() -> None:
                 "slam_nodes": m["slam_nodes"],
                 "slam_loops": m["slam_loops"],
                 "rejected_loops": m["rejected_loops"],
+                "unconfirmed_loops": m["unconfirmed_loops"],  # no second loop agreed
                 "relinks": m["relinks"],
                 "relink_s": m["relink_s"],
                 "tracking_ms_median": m["tracking_ms_median"],
