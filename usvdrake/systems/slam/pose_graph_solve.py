@@ -53,7 +53,7 @@ class PoseGraphProblem:
     alpha: float = 0.0
     c: float = 1.0
     max_iterations: int = 100
-    gnc_step: float = 1.4  # the factor GNC's μ moves by per step (Yang et al. 2020: 1.4)
+    gnc_step: float = 1.4  # the factor GNC's μ moves by per step (gtsam's default)
 
 
 @dataclass(frozen=True)

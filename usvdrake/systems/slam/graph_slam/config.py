@@ -58,8 +58,9 @@ class GraphSlamConfig:
     # full optimisations reject outlier loops by GNC (TLS loss) instead of a robust kernel;
     # the loops' covariance gets this floor [m, m, rad] (what a correct loop may still be off)
     loop_gnc: bool = False
-    # the factor GNC's μ moves by between its steps (gtsam's default 1.4): 3 took raw Freiburg
-    # 079's full solves from 1.1-1.9 s to 0.3-0.8 s, the same loops rejected on 5 of 6 captured
+    # the factor GNC's μ moves by between its steps (gtsam's default 1.4): 3 took the four largest
+    # full solves captured from raw Freiburg 079 from 1.1-1.9 s to 0.45-0.77 s, the same loops
+    # rejected on 5 of the 6 captured
     gnc_step: float = 3.0
     loop_min_sigma: list[float] = field(default_factory=lambda: [0.03, 0.03, 0.01])
     loop_per_chain: bool = False  # match one node per pass near the new node, not every one

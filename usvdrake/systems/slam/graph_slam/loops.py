@@ -97,10 +97,9 @@ class LoopMixin:
         nodes = self.nodes
         via_a = compose(a.z, between(nodes[a.j].pose, nodes[b.j].pose))
         via_b = compose(between(nodes[a.i].pose, nodes[b.i].pose), b.z)
-        d = via_a - via_b
-        turn = abs((d[2] + np.pi) % (2 * np.pi) - np.pi)
+        d = between(via_b, via_a)  # (its heading wrapped)
         tol = self.cfg.loop_confirm_tolerance
-        return bool(np.hypot(d[0], d[1]) <= tol[0] and turn <= tol[1])
+        return bool(np.hypot(d[0], d[1]) <= tol[0] and abs(d[2]) <= tol[1])
 
     def _link(
         self, i: int, k: int, robust: bool, kind: str, search: bool = False, into=None
