@@ -7,6 +7,7 @@ from scipy.ndimage import distance_transform_edt
 from usvdrake.systems.slam.correlative import (
     LikelihoodField,
     _squared_distance_transform,
+    _window_max,
     correlative_match,
     distance_field,
     lateral_motion,
@@ -45,6 +46,26 @@ def test_the_distance_transform_is_scipys_to_the_bit(shape):
         empty.flat[rng.integers(empty.size)] = False  # at least one point
         ours = np.sqrt(_squared_distance_transform(empty).astype(float))
         np.testing.assert_array_equal(ours, distance_transform_edt(empty))
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (3, 17), (40, 70), (101, 63)])
+def test_the_bound_tables_are_the_block_maxima(shape):
+    """``_window_max``: every cell the max of the n × n cells ``step`` apart from it (those
+    beyond the edge left out), as a plain numpy max over the padded shifts gives it."""
+    rng = np.random.default_rng(shape[0] * 7 + shape[1])
+    field = rng.random(shape)
+    for n, step in ((1, 1), (2, 1), (2, 4), (2, 16), (3, 2), (4, 1), (5, 3)):
+        padded = np.full((shape[0] + n * step, shape[1] + n * step), -np.inf)
+        padded[: shape[0], : shape[1]] = field
+        expected = np.max(
+            [
+                padded[a * step : a * step + shape[0], b * step : b * step + shape[1]]
+                for a in range(n)
+                for b in range(n)
+            ],
+            axis=0,
+        )
+        np.testing.assert_array_equal(_window_max(field, n, step), expected)
 
 
 def test_large_motion_recovered_where_plain_plicp_fails():
