@@ -100,30 +100,27 @@ def _squared_distance_transform(empty: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, parallel=True)
-def _block_max(src: np.ndarray, n: int, step: int) -> np.ndarray:
-    """out[r, c] = max of src[r + a·step, c + b·step] over a, b < n (those beyond the edge
-    left out): down the rows into a temporary, then along the columns, each cell written once
-    (rows on numba's threads)."""
+def _shift_max(src: np.ndarray, n: int, step: int, dr: int, dc: int) -> np.ndarray:
+    """out[r, c] = max of src[r + a·step·dr, c + a·step·dc] over a < n (those beyond the edge
+    left out), each cell written once (rows on numba's threads)."""
     rows, cols = src.shape
-    down = np.empty_like(src)
+    out = np.empty_like(src)
     for r in prange(rows):
         for c in range(cols):
             v = src[r, c]
             for a in range(1, n):
-                if r + a * step >= rows:
+                rr, cc = r + a * step * dr, c + a * step * dc
+                if rr >= rows or cc >= cols:
                     break
-                v = max(v, src[r + a * step, c])
-            down[r, c] = v
-    out = np.empty_like(src)
-    for r in prange(rows):
-        for c in range(cols):
-            v = down[r, c]
-            for b in range(1, n):
-                if c + b * step >= cols:
-                    break
-                v = max(v, down[r, c + b * step])
+                v = max(v, src[rr, cc])
             out[r, c] = v
     return out
+
+
+def _block_max(src: np.ndarray, n: int, step: int) -> np.ndarray:
+    """out[r, c] = max of src[r + a·step, c + b·step] over a, b < n (those beyond the edge
+    left out): down the rows, then along the columns."""
+    return _shift_max(_shift_max(src, n, step, 1, 0), n, step, 0, 1)
 
 
 @njit(cache=True, parallel=True)
