@@ -1079,3 +1079,36 @@ def test_the_full_problem_carries_the_gnc_step():
         problem = slam._problem(full=True)
         assert problem.gnc_step == step
         assert solve_pose_graph(problem).rejected == {len(slam.constraints) - 1}
+
+
+def test_a_match_that_shows_little_of_the_nodes_scene_fails_whatever_its_residual():
+    """``min_track_score``: a scan of other surroundings (random clutter) paired with the
+    node's room at some pose passes a lax residual limit, but its points' likelihood in the
+    room's field is low: with the floor it fails and the pose coasts; a scan of the room from
+    a step away still matches."""
+    a = HOKUYO.azimuths
+
+    def room_scan(pose):
+        r = cast(ROOM, HOKUYO, [0.0], np.array(pose[:2]), 1.0, pose[2], 30.0)[0]
+        v = np.isfinite(r)
+        return np.column_stack([r[v] * np.cos(a[v]), r[v] * np.sin(a[v])]), r
+
+    rng = np.random.default_rng(3)
+    clutter = rng.uniform(-4.0, 4.0, (300, 2))
+    base = _loop_search_config(max_track_residual=10.0, min_link_points=20)
+    outcomes = {}
+    for floor in (0.0, 0.3):
+        slam = GraphSlam(replace(base, min_track_score=floor))
+        pts, r = room_scan((0.0, 0.0, 0.0))
+        slam.process(pts, r, a, 0.0)
+        pose = slam.process(
+            clutter, np.hypot(*clutter.T), np.arctan2(clutter[:, 1], clutter[:, 0]), 0.1
+        )
+        outcomes[floor] = (slam.stats["failed_matches"], pose)
+        pts, r = room_scan((0.1, 0.05, 0.03))
+        good = slam.process(pts, r, a, 0.2)
+        outcomes[floor] += (slam.stats["failed_matches"], good)
+    assert outcomes[0.0][0] == 0  # the residual alone lets the clutter through
+    assert outcomes[0.3][0] == outcomes[0.3][2] == 1  # the clutter fails, the room's scan not
+    np.testing.assert_allclose(outcomes[0.3][3], (0.1, 0.05, 0.03), atol=0.02)
+    np.testing.assert_allclose(outcomes[0.3][1], 0.0, atol=1e-12)  # coasted: no motion yet

@@ -42,6 +42,11 @@ class GraphSlamConfig:
     # half-empty scan): the pose follows the constant-velocity guess and the scan never
     # becomes a node, so it cannot become the reference of the scans after it
     max_track_residual: float = 0.2
+    # [-] a tracking match whose points' mean likelihood in the node's field (0-1) is below this
+    # failed too, whatever its residual: PLICP's residual is over the pairs it kept, and a scan
+    # that shows little of the node's scene (after a gap in the log) can pair a few points well
+    # at a wrong pose (0: off)
+    min_track_score: float = 0.0
     reanchor_after: int = 10  # [scans] failed in a row: the current scan becomes a node
     loop_index_gap: int = 40  # [nodes] index difference that makes a loop candidate
     loop_radius: float = 6.0  # [m] distance that makes a loop candidate

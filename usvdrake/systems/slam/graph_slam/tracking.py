@@ -117,6 +117,10 @@ class TrackingMixin:
             res.n_valid < self.cfg.min_link_points
             or not np.isfinite(res.theta)
             or not res.residual <= self.cfg.max_track_residual
+            or (
+                self.cfg.min_track_score > 0
+                and last.field(self.cfg).score(points, res.pose) < self.cfg.min_track_score
+            )
         )
         if failed:
             self.stats["failed_matches"] += 1
