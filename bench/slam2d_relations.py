@@ -31,7 +31,12 @@ from pathlib import Path
 
 import numpy as np
 
-from usvdrake.analysis.trajectory_metrics import read_tum
+from usvdrake.analysis.trajectory_metrics import (
+    planar_to_se3,
+    read_tum,
+    se3_from_xyz_quat,
+    se3_to_planar,
+)
 from usvdrake.logs.carmen import associate_scans, read_carmen
 from usvdrake.systems.slam.graph_slam.poses import between
 
@@ -56,11 +61,8 @@ Register = Callable[[int, int, np.ndarray], tuple[np.ndarray, float, float]]
 
 def scan_points(rec) -> np.ndarray:
     """A CARMEN scan's returns (N × 2) [m] in the laser's frame, up to ``MAX_RANGE``."""
-    s = rec.scan
-    r = np.asarray(s.ranges, float)
-    ok = np.asarray(s.valid, bool) & np.isfinite(r) & (r > 0) & (r < MAX_RANGE)
-    a = np.asarray(s.angles)[ok]
-    return np.column_stack([r[ok] * np.cos(a), r[ok] * np.sin(a)])
+    p = rec.scan.points()
+    return p[np.hypot(p[:, 0], p[:, 1]) < MAX_RANGE]
 
 
 def open3d_icp(points: list[np.ndarray]) -> Register:
@@ -77,14 +79,11 @@ def open3d_icp(points: list[np.ndarray]) -> Register:
     method = reg.TransformationEstimationPointToPoint()
 
     def register(i: int, j: int, guess: np.ndarray):
-        T = np.eye(4)
-        c, s = np.cos(guess[2]), np.sin(guess[2])
-        T[:2, :2], T[:2, 3] = [[c, -s], [s, c]], guess[:2]
+        T = planar_to_se3(guess)[0]
         for d in (0.5, 0.2, 0.1):
             out = reg.registration_icp(clouds[j], clouds[i], d, T, method, criteria)
-            T = out.transformation
-        pose = np.array([T[0, 3], T[1, 3], np.arctan2(T[1, 0], T[0, 0])])
-        return pose, float(out.fitness), float(out.inlier_rmse)
+            T = np.asarray(out.transformation)
+        return se3_to_planar(T[None])[0], float(out.fitness), float(out.inlier_rmse)
 
     return register
 
@@ -147,10 +146,9 @@ def score_log(raw_log: Path, corrected: Path, trajectory: Path, loop_gap: float)
     t_raw = np.array([r.timestamp for r in raw])
     if len(t) != len(raw) or not np.allclose(t, t_raw):
         raise SystemExit(f"slam2d_relations: {trajectory} is not a run of {raw_log.name}")
-    yaw = 2.0 * np.arctan2(quat[:, 2], quat[:, 3])  # planar: a rotation about z
     pairs = associate_scans(raw, ref_scans)
     keep = np.flatnonzero(pairs >= 0)
-    ours = np.column_stack([xyz[:, :2], yaw])[pairs[keep]]
+    ours = se3_to_planar(se3_from_xyz_quat(xyz, quat))[pairs[keep]]
     ref = np.array([ref_scans[k].odometry_pose for k in keep], float)
     register = open3d_icp([scan_points(ref_scans[k]) for k in keep])
     local, loop = candidate_pairs(t_raw[pairs[keep]], ours, ref, loop_gap)

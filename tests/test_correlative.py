@@ -4,14 +4,12 @@ import numpy as np
 import pytest
 from scipy.ndimage import distance_transform_edt
 
-from usvdrake.systems.slam.correlative import (
+from usvdrake.systems.slam.correlative import correlative_match, lateral_motion, match_covariance
+from usvdrake.systems.slam.likelihood_field import (
     LikelihoodField,
     _squared_distance_transform,
     _window_max,
-    correlative_match,
     distance_field,
-    lateral_motion,
-    match_covariance,
 )
 from usvdrake.systems.slam.plicp import plicp
 from usvdrake.worlds.raycast import cast

@@ -9,8 +9,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from usvdrake.systems.slam.correlative import LikelihoodField
 from usvdrake.systems.slam.graph_slam.config import GraphSlamConfig
+from usvdrake.systems.slam.likelihood_field import LikelihoodField
 
 
 class _AppendLog:

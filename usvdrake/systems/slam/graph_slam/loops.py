@@ -9,9 +9,10 @@ held until a second loop between the same passes agrees with it (:meth:`_confirm
 import numpy as np
 from scipy.spatial import cKDTree
 
-from usvdrake.systems.slam.correlative import LikelihoodField, correlative_match
+from usvdrake.systems.slam.correlative import correlative_match
 from usvdrake.systems.slam.graph_slam.graph import Constraint
 from usvdrake.systems.slam.graph_slam.poses import between, compose
+from usvdrake.systems.slam.likelihood_field import LikelihoodField
 from usvdrake.systems.slam.plicp import plicp, rot
 
 
