@@ -411,6 +411,8 @@ def run_slam2d(
         "rejected_loops": int(slam.stats.get("rejected_loops", 0)),
         # loops dropped because no second loop confirmed them (GraphSlamConfig.loop_confirm_nodes)
         "unconfirmed_loops": int(slam.stats.get("unconfirmed_loops", 0)),
+        # loop searches whose candidate's field was kept from an earlier search (exact)
+        "loop_fields_reused": int(slam.stats.get("loop_fields_reused", 0)),
         # links of the final estimate's passes (GraphSlamConfig.relink_radius) and [s] of wall
         # time they and their optimisation took after the last scan (in wall_time_s)
         "relinks": int(slam.stats.get("relinks", 0)),

@@ -7,6 +7,7 @@ rendering and re-rendering of moved nodes, and the structural ``copy.deepcopy``.
 
 import copy
 import time
+from collections import OrderedDict
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -50,6 +51,9 @@ class GraphSlam(TrackingMixin, OdometryMixin, LoopMixin, RelinkMixin, Optimisati
         self._admitted: tuple = ()
         # [m] (x, y) of every node, kept with Node.pose: the loop candidates' distances
         self._xy = np.zeros((0, 2))
+        # loop candidates' (scans, submap, field) by (node, submap poses), least recently used
+        # first: shared by copies, which the scans' identity keeps apart (LoopMixin._loop_field)
+        self._loop_fields: OrderedDict = OrderedDict()
         res = cfg.map_resolution
         shape = (int(cfg.map_size[1] / res), int(cfg.map_size[0] / res))
         self.map = LogOddsGrid(tuple(cfg.map_origin), res, shape)
@@ -62,6 +66,7 @@ class GraphSlam(TrackingMixin, OdometryMixin, LoopMixin, RelinkMixin, Optimisati
             "failed_matches": 0,
             "odometry_rejected": 0,  # odometry constraints left out by odometry_gate
             "unconfirmed_loops": 0,  # loops dropped for want of a second (loop_confirm_nodes)
+            "loop_fields_reused": 0,  # loop searches whose field was kept from an earlier one
         }
         self.full_pending = False
         self._full_job = None  # (job, problem, node count) of the running full optimisation
