@@ -73,7 +73,7 @@ def add_arguments(m) -> None:
         action="store_true",
         help="with odometry, keep up with the robot: search about the odometry's guess, a node "
         "every 0.15 m, loops looked for every 0.3 m (raw CARMEN logs 9-14x real time instead "
-        "of 3.3-6.7x; ATE 0.12-0.20 m instead of 0.10-0.17 m; not usable on raw ACES, whose "
+        "of 4.2-7.5x; ATE 0.12-0.20 m instead of 0.10-0.17 m; not usable on raw ACES, whose "
         "corridors driven once keep the sparser nodes' heading drift: 3.7 m)",
     )
     m.add_argument("--quiet", action="store_true", help="no progress bar")
