@@ -3,6 +3,7 @@
 copies whose nodes differ, bounded in number, and a run with it equals a run without."""
 
 import copy
+import pickle
 from dataclasses import replace
 from pathlib import Path
 
@@ -69,6 +70,21 @@ def test_a_moved_neighbour_or_another_copys_scans_rebuild_it():
     assert theirs is not moved
     np.testing.assert_array_equal(theirs.fine, _fresh(other, 2).fine)
     assert slam._loop_field(2)[1] is moved  # the original's field is still its own
+
+
+def test_a_pickled_slam_rebuilds_rather_than_trusting_stale_ids():
+    slam = _slam()
+    _, field = slam._loop_field(2)
+    loaded = pickle.loads(pickle.dumps(slam))
+    # the same scans at the same poses: a key built from the old ids must not be trusted
+    for key in list(loaded._loop_fields):
+        entry = loaded._loop_fields.pop(key)
+        ids = tuple(id(n.points) for n in loaded.nodes[1:4])
+        loaded._loop_fields[(key[0], key[1], ids)] = ([p.copy() for p in entry[0]], *entry[1:])
+    before = loaded.stats["loop_fields_reused"]
+    _, rebuilt = loaded._loop_field(2)
+    assert loaded.stats["loop_fields_reused"] == before
+    np.testing.assert_array_equal(rebuilt.fine, field.fine)
 
 
 def test_the_cache_keeps_the_last_used_only(monkeypatch):

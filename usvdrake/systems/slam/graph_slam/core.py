@@ -51,8 +51,9 @@ class GraphSlam(TrackingMixin, OdometryMixin, LoopMixin, RelinkMixin, Optimisati
         self._admitted: tuple = ()
         # [m] (x, y) of every node, kept with Node.pose: the loop candidates' distances
         self._xy = np.zeros((0, 2))
-        # loop candidates' (scans, submap, field) by (node, submap poses), least recently used
-        # first: shared by copies, which the scans' identity keeps apart (LoopMixin._loop_field)
+        # loop candidates' (scans, submap, field) by (node, submap poses, scans' ids), least
+        # recently used first: shared by copies, which the scans' identity keeps apart
+        # (LoopMixin._loop_field)
         self._loop_fields: OrderedDict = OrderedDict()
         res = cfg.map_resolution
         shape = (int(cfg.map_size[1] / res), int(cfg.map_size[0] / res))

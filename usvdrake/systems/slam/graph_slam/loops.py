@@ -84,7 +84,8 @@ class LoopMixin:
         poses = np.array([n.pose for n in nodes]).tobytes()
         key = (i, poses, tuple(id(n.points) for n in nodes))
         kept = self._loop_fields.get(key)
-        if kept is not None:
+        # (ids alone could coincide after a pickled SLAM is loaded elsewhere: check the scans)
+        if kept is not None and all(a is n.points for a, n in zip(kept[0], nodes, strict=True)):
             self._loop_fields.move_to_end(key)
             self.stats["loop_fields_reused"] += 1
             return kept[1], kept[2]
